@@ -1,0 +1,1 @@
+"""arboretum_client."""

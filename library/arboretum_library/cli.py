@@ -1,0 +1,87 @@
+"""The ``arboretum`` command: one entry point, subcommands found through entry points.
+
+Each package registers its subcommands in pyproject under ``arboretum.commands`` as a function
+``register(subparsers)`` that adds a parser and sets ``func`` (called with the parsed namespace, returns
+an exit code). Registering modules import nothing heavy, so ``arboretum --help`` starts fast; the
+library never imports the server or the client.
+
+A user's mistake (``ArboretumError``) prints one line and exits 2; Ctrl-C exits 130 after the
+command's own clean-up has run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from importlib.metadata import entry_points
+from typing import Any
+
+from . import __version__
+from .errors import ArboretumError
+
+GROUP = "arboretum.commands"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="arboretum",
+        description="Realistic 3D trees from real ones: scans -> HBL example libraries -> assembly -> growth -> export.",
+    )
+    parser.add_argument("--version", action="version", version=f"arboretum {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for ep in sorted(entry_points(group=GROUP), key=lambda e: e.name):
+        try:
+            register = ep.load()
+        except ImportError as exc:  # an extra that is not installed: say so, keep the rest
+            p = sub.add_parser(ep.name, help=f"(unavailable: {exc.name} is not installed)")
+            p.set_defaults(func=_unavailable(ep.name, str(exc)))
+            continue
+        register(sub)
+    return parser
+
+
+def _unavailable(name: str, why: str):
+    def run(args: argparse.Namespace) -> int:
+        raise ArboretumError(f"'{name}' needs a package that is not installed ({why}); run 'make install'")
+
+    return run
+
+
+def add_json_flag(parser: argparse.ArgumentParser) -> None:
+    """Give a subcommand the standard ``--json`` flag."""
+    parser.add_argument("--json", action="store_true", help="print a machine-readable JSON summary")
+
+
+def emit(args: argparse.Namespace, data: Any, text: str) -> None:
+    """Print ``data`` as JSON when ``--json`` was given, else the human ``text``."""
+    if getattr(args, "json", False):
+        print(json.dumps(data, indent=2, sort_keys=True, default=_json_default))
+    else:
+        print(text)
+
+
+def _json_default(o: Any) -> Any:
+    if hasattr(o, "tolist"):
+        return o.tolist()
+    return str(o)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 1
+    try:
+        return int(args.func(args) or 0)
+    except ArboretumError as exc:
+        print(f"arboretum {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"arboretum {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,77 @@
+"""Descriptors and keyword tags of an example (VRTree section 3.4, "Examples library", Fig. 6).
+
+The paper classifies examples by the curvature of the main branch and the number of lobes, and lets users
+search by "dense", "sparse", "straight" and "curved". We fix the meaning of each here, once, so every
+library agrees:
+
+- curvature: total turning angle (radians) of the main branch after resampling it to 8 equal-length
+  segments; a straight branch scores 0, a quarter circle about pi/2. Resampling makes it insensitive to
+  the zig-zag of graph shortest paths and independent of scale.
+- dense / sparse: lobe count at or above ``dense_lobes`` / at or below ``sparse_lobes``.
+- straight / curved: curvature below ``straight_rad`` / above ``curved_rad``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .geometry import point_polyline_distance, resample_polyline
+from .model import HBL, Descriptors
+
+CURVATURE_SEGMENTS = 8
+
+
+@dataclass(frozen=True)
+class TagThresholds:
+    """Where the keyword tags start."""
+
+    dense_lobes: int = 6
+    """Lobe count at or above which an example is 'dense'."""
+    sparse_lobes: int = 3
+    """Lobe count at or below which an example is 'sparse'."""
+    straight_rad: float = 0.35
+    """Curvature (radians) below which the main branch is 'straight' (about 20 degrees in all)."""
+    curved_rad: float = 0.7
+    """Curvature (radians) above which the main branch is 'curved' (about 40 degrees in all)."""
+
+
+def polyline_curvature(points: np.ndarray, segments: int = CURVATURE_SEGMENTS) -> float:
+    """Total turning angle (radians) of a polyline ``points`` (N, 3) resampled to ``segments``."""
+    pts = resample_polyline(points, segments + 1)
+    d = np.diff(pts, axis=0)
+    n = np.linalg.norm(d, axis=1)
+    d = d[n > 1e-12] / n[n > 1e-12, None]
+    if len(d) < 2:
+        return 0.0
+    cos = np.clip((d[:-1] * d[1:]).sum(axis=1), -1.0, 1.0)
+    return float(np.arccos(cos).sum())
+
+
+def describe(structure: HBL) -> Descriptors:
+    """Descriptors of an example's structure (main branch = ``structure.branches[0]``)."""
+    main = structure.branches[0]
+    centres = np.array([lb.centre for lb in structure.lobes]).reshape(-1, 3)
+    spread = float(point_polyline_distance(centres, main.points).mean()) if len(centres) else 0.0
+    return Descriptors(
+        curvature=polyline_curvature(main.points),
+        lobe_count=len(structure.lobes),
+        length=main.length,
+        spread=spread,
+        height=structure.height,
+    )
+
+
+def tags_for(d: Descriptors, t: TagThresholds = TagThresholds()) -> tuple[str, ...]:
+    """The keyword tags that ``d`` earns under thresholds ``t``."""
+    tags = []
+    if d.lobe_count >= t.dense_lobes:
+        tags.append("dense")
+    if d.lobe_count <= t.sparse_lobes:
+        tags.append("sparse")
+    if d.curvature < t.straight_rad:
+        tags.append("straight")
+    if d.curvature > t.curved_rad:
+        tags.append("curved")
+    return tuple(tags)

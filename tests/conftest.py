@@ -1,0 +1,31 @@
+"""Shared fixtures: a fixed seed, strict floating point, the bundled scans."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from arboretum_library.assets import assets_dir
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_SCANS = REPO.parent / "shared" / "data" / "scans"
+
+
+@pytest.fixture(autouse=True)
+def _strict_numpy():
+    old = np.seterr(all="raise", under="ignore")
+    yield
+    np.seterr(**old)
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(12345)
+
+
+@pytest.fixture(scope="session")
+def scans_dir() -> Path:
+    """Bundled copies of the real scans (assets/scans), each with its licence."""
+    return assets_dir() / "scans"
