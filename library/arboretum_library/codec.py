@@ -11,13 +11,16 @@ from __future__ import annotations
 import dataclasses
 import functools
 import io
+import json
+import os
 from collections.abc import Mapping
 from enum import IntEnum
+from pathlib import Path
 from typing import Any, TypeVar, get_args, get_origin, get_type_hints
 
 import numpy as np
 
-from .errors import ValidationError
+from .errors import InputError, ValidationError
 
 T = TypeVar("T")
 ARRAY = "$array"
@@ -102,3 +105,65 @@ def npz_to_arrays(data: bytes | io.BufferedIOBase, where: str = "npz") -> dict[s
             return {k: z[k] for k in z.files}
     except (ValueError, OSError, EOFError) as exc:
         raise ValidationError(f"{where}: not a readable .npz ({exc})") from None
+
+
+META_KEY = "__meta__"
+"""Key of the JSON metadata inside a record .npz (stored as a uint8 array of UTF-8 bytes)."""
+RECORD_SCHEMA = 1
+
+
+def save_record(path: str | os.PathLike, record: Any) -> Path:
+    """Write ``record`` to one .npz file atomically (temp file + rename); returns the path.
+
+    The file holds every array under its path key and ``__meta__``: JSON ``{"kind": type name,
+    "schema": RECORD_SCHEMA, "record": metadata}``. Readable by any numpy, no pickle.
+    """
+    path = Path(path)
+    meta, arrays = flatten(record)
+    head = {"kind": type(record).__name__, "schema": RECORD_SCHEMA, "record": meta}
+    arrays = dict(arrays)
+    arrays[META_KEY] = np.frombuffer(json.dumps(head).encode(), dtype=np.uint8)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_bytes(arrays_to_npz(arrays))
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
+def record_kind(path: str | os.PathLike) -> str:
+    """The record type name stored in a .npz written by ``save_record``."""
+    return _read_record_file(Path(path))[0]["kind"]
+
+
+def load_record(path: str | os.PathLike, cls: type[T]) -> T:
+    """Read a ``cls`` record written by ``save_record``; ``InputError`` names the file on any problem."""
+    path = Path(path)
+    head, arrays = _read_record_file(path)
+    if head.get("kind") != cls.__name__:
+        raise InputError(f"{path}: holds a {head.get('kind')!r} record, expected {cls.__name__}")
+    try:
+        return unflatten(cls, head["record"], arrays)
+    except ValidationError as exc:
+        raise InputError(f"{path}: {exc}") from None
+
+
+def _read_record_file(path: Path) -> tuple[dict, dict[str, np.ndarray]]:
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
+    try:
+        arrays = npz_to_arrays(path.read_bytes(), str(path))
+    except ValidationError as exc:
+        raise InputError(str(exc)) from None
+    raw = arrays.pop(META_KEY, None)
+    if raw is None:
+        raise InputError(f"{path}: not an Arboretum record file (no {META_KEY} entry)")
+    try:
+        head = json.loads(raw.tobytes().decode())
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        raise InputError(f"{path}: its {META_KEY} entry is not valid JSON") from None
+    if not isinstance(head, dict) or head.get("schema", 0) > RECORD_SCHEMA:
+        raise InputError(f"{path}: record schema {head.get('schema') if isinstance(head, dict) else '?'} is newer than this Arboretum reads ({RECORD_SCHEMA})")
+    return head, arrays

@@ -5,7 +5,8 @@ search by "dense", "sparse", "straight" and "curved". We fix the meaning of each
 library agrees:
 
 - curvature: total turning angle (radians) of the main branch after resampling it to 8 equal-length
-  segments; a straight branch scores 0, a quarter circle about pi/2. Resampling makes it insensitive to
+  segments (scaled by 8/7, so that a circular arc scores its true angle); a straight branch scores 0,
+  a quarter circle pi/2. Resampling makes it insensitive to
   the zig-zag of graph shortest paths and independent of scale.
 - dense / sparse: lobe count at or above ``dense_lobes`` / at or below ``sparse_lobes``.
 - straight / curved: curvature below ``straight_rad`` / above ``curved_rad``.
@@ -38,15 +39,27 @@ class TagThresholds:
 
 
 def polyline_curvature(points: np.ndarray, segments: int = CURVATURE_SEGMENTS) -> float:
-    """Total turning angle (radians) of a polyline ``points`` (N, 3) resampled to ``segments``."""
-    pts = resample_polyline(points, segments + 1)
+    """Total turning angle (radians) of a polyline ``points`` (N, 3), measured over ``segments``.
+
+    The polyline is resampled densely, smoothed with a moving average one segment long (odd reflection
+    at the ends keeps straight lines straight), then resampled to ``segments`` chords, so vertex
+    noise such as the zig-zag of graph shortest paths does not count as curvature.
+    """
+    dense_per_segment = 16
+    dense = resample_polyline(points, segments * dense_per_segment + 1)
+    h = dense_per_segment // 2
+    padded = np.concatenate([2 * dense[0] - dense[h:0:-1], dense, 2 * dense[-1] - dense[-2 : -h - 2 : -1]])
+    kernel = np.ones(2 * h + 1) / (2 * h + 1)
+    smooth = np.stack([np.convolve(padded[:, k], kernel, mode="valid") for k in range(3)], axis=1)
+    pts = resample_polyline(smooth, segments + 1)
     d = np.diff(pts, axis=0)
     n = np.linalg.norm(d, axis=1)
     d = d[n > 1e-12] / n[n > 1e-12, None]
     if len(d) < 2:
         return 0.0
     cos = np.clip((d[:-1] * d[1:]).sum(axis=1), -1.0, 1.0)
-    return float(np.arccos(cos).sum())
+    # Chords of an arc turn by (segments - 1)/segments of its true angle: undo that bias.
+    return float(np.arccos(cos).sum() * segments / (segments - 1))
 
 
 def describe(structure: HBL) -> Descriptors:
