@@ -1,0 +1,160 @@
+"""One example on disk: a folder holding ``meta.json`` and ``arrays.npz``, written whole or not at all.
+
+``write_folder`` fills a fresh staging folder (optionally fsynced); the store then renames the whole
+folder into place, so a reader never sees half of one. ``read_folder`` checks everything it reads (JSON,
+format marker, schema, SHA-256 of the arrays, the record's own validation) and names the broken file.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import hashlib
+import json
+import os
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from .catalog import SCHEMA_VERSION, Entry
+from .codec import arrays_to_npz, flatten, npz_to_arrays, unflatten
+from .errors import StoreError, ValidationError
+from .model import Example
+
+META = "meta.json"
+ARRAYS = "arrays.npz"
+EXAMPLE_FORMAT = "arboretum-example"
+
+
+@dataclass(frozen=True)
+class Folder:
+    """An example folder that was read and checked."""
+
+    example: Example
+    entry: Entry
+    """The catalog row describing it."""
+
+
+def valid_id(id_: str) -> bool:
+    """True when ``id_`` is a legal example id (the rule of ``Example.id``), so a safe folder name."""
+    return bool(id_) and len(id_) <= 128 and all(c.isalnum() or c in "-_" for c in id_)
+
+
+def now_utc() -> str:
+    """The current UTC time, ISO 8601 with a Z, to the second."""
+    return datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+def fsync_path(path: Path) -> None:
+    """fsync a file or a directory (so a rename or a new entry in it is durable)."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def write_bytes(path: Path, data: bytes, durable: bool) -> None:
+    """Create ``path`` with ``data``; fsync it when ``durable``."""
+    with open(path, "xb") as f:
+        f.write(data)
+        if durable:
+            f.flush()
+            os.fsync(f.fileno())
+
+
+def encode(example: Example, created: str | None = None) -> tuple[bytes, bytes]:
+    """The bytes of ``meta.json`` and ``arrays.npz`` for ``example``."""
+    meta, arrays = flatten(example)
+    npz = arrays_to_npz(arrays)
+    head = {
+        "format": EXAMPLE_FORMAT,
+        "schema": SCHEMA_VERSION,
+        "id": example.id,
+        "created": created or now_utc(),
+        "arrays_sha256": hashlib.sha256(npz).hexdigest(),
+        "arrays_bytes": len(npz),
+        "example": meta,
+    }
+    return (json.dumps(head, indent=1, sort_keys=True) + "\n").encode(), npz
+
+
+def write_folder(folder: Path, meta_bytes: bytes, npz_bytes: bytes, durable: bool) -> None:
+    """Create ``folder`` holding the two files (fsynced with the folder itself when ``durable``)."""
+    folder.mkdir()
+    write_bytes(folder / ARRAYS, npz_bytes, durable)
+    write_bytes(folder / META, meta_bytes, durable)
+    if durable:
+        fsync_path(folder)
+
+
+def entry_for(example: Example, head: dict[str, Any], size_bytes: int) -> Entry:
+    """The catalog row of ``example`` whose meta.json header is ``head``."""
+    p = example.provenance
+    return Entry(example.id, p.species.lower(), p.source, p.source_sha256, example.tags,
+                 example.descriptors, head["arrays_sha256"], size_bytes, head["created"])
+
+
+def decode(meta_bytes: bytes, npz_bytes: bytes, where: str) -> tuple[Example, dict[str, Any]]:
+    """Check and rebuild an example from its two files; ``ValidationError`` says what is wrong."""
+    try:
+        head = json.loads(meta_bytes.decode())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValidationError(f"{where}/{META} is not valid JSON ({exc})") from None
+    if not isinstance(head, dict) or head.get("format") != EXAMPLE_FORMAT:
+        raise ValidationError(f"{where}/{META} is not an Arboretum example (no format marker)")
+    if not isinstance(head.get("schema"), int) or head["schema"] > SCHEMA_VERSION:
+        raise ValidationError(f"{where}/{META}: schema {head.get('schema')!r} is newer than this Arboretum reads ({SCHEMA_VERSION})")
+    for key in ("id", "created", "arrays_sha256", "example"):
+        if key not in head:
+            raise ValidationError(f"{where}/{META}: the field {key!r} is missing")
+    if hashlib.sha256(npz_bytes).hexdigest() != head["arrays_sha256"]:
+        raise ValidationError(f"{where}/{ARRAYS} is corrupt (its SHA-256 differs from the one in {META})")
+    arrays = npz_to_arrays(npz_bytes, f"{where}/{ARRAYS}")
+    try:
+        example = unflatten(Example, head["example"], arrays)
+    except ValidationError as exc:
+        raise ValidationError(f"{where}/{META}: {exc}") from None
+    if example.id != head["id"]:
+        raise ValidationError(f"{where}/{META}: id {head['id']!r} differs from the record's {example.id!r}")
+    return example, head
+
+
+def read_folder(folder: Path) -> Folder:
+    """Read and check the example in ``folder``. ``StoreError`` names the missing or broken file."""
+    try:
+        meta_bytes = (folder / META).read_bytes()
+        npz_bytes = (folder / ARRAYS).read_bytes()
+    except FileNotFoundError as exc:
+        raise StoreError(f"example folder {folder} is incomplete: {exc.filename} is missing") from None
+    except OSError as exc:
+        raise StoreError(f"cannot read {exc.filename}: {exc.strerror}") from None
+    try:
+        example, head = decode(meta_bytes, npz_bytes, str(folder))
+    except ValidationError as exc:
+        raise StoreError(str(exc)) from None
+    return Folder(example, entry_for(example, head, len(meta_bytes) + len(npz_bytes)))
+
+
+_RENAME_EXCHANGE = 2
+_libc = None
+
+
+def exchange(a: Path, b: Path) -> bool:
+    """Atomically swap two existing directories (Linux ``renameat2``). False when unsupported."""
+    global _libc
+    if _libc is None:
+        name = ctypes.util.find_library("c")
+        _libc = ctypes.CDLL(name, use_errno=True) if name else False
+    fn = getattr(_libc, "renameat2", None) if _libc else None
+    if fn is None:
+        return False
+    at_fdcwd = -100
+    rc = fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), _RENAME_EXCHANGE)
+    if rc == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (22, 38, 95):  # EINVAL, ENOSYS, EOPNOTSUPP: the filesystem cannot exchange
+        return False
+    raise OSError(err, os.strerror(err), str(a))

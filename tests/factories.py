@@ -1,0 +1,126 @@
+"""Plausible HBL records for tests: examples and whole trees built from a seeded Generator.
+
+Import as ``from factories import make_example`` (pytest puts tests/ on sys.path through conftest.py)
+or ``from tests.factories import make_example`` (when the repository root is on sys.path).
+Same Generator state, same record, on every machine.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from arboretum_library.codec import flatten
+from arboretum_library.descriptors import describe, tags_for
+from arboretum_library.model import HBL, LEAF, WOOD, Branch, Example, Level, Lobe, Provenance
+
+_OCTA_DIRS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
+_OCTA_FACES = np.array(
+    [[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]], np.int32
+)
+"""Outward-facing triangles of the unit octahedron ``_OCTA_DIRS``."""
+
+
+def main_polyline(rng: np.random.Generator, base: np.ndarray, length: float, curved: bool,
+                  n: int = 9) -> np.ndarray:
+    """(n, 3) polyline from ``base`` rising in Z: straight (mm jitter) or bent through about 90 deg."""
+    s = np.linspace(0.0, 1.0, n)
+    if curved:
+        radius = length / (np.pi / 2)
+        heading = rng.uniform(0, 2 * np.pi)
+        out = radius * (1 - np.cos(s * np.pi / 2))
+        pts = np.c_[out * np.cos(heading), out * np.sin(heading), radius * np.sin(s * np.pi / 2)]
+    else:
+        pts = np.c_[rng.normal(0, 1e-3, n), rng.normal(0, 1e-3, n), s * length]
+        pts[0, :2] = 0.0
+    return pts + base
+
+
+def make_lobe(rng: np.random.Generator, centre: np.ndarray, radius: float, n_points: int,
+              branch: int) -> Lobe:
+    """A lobe of ``n_points`` members in a ball around ``centre`` and an octahedral hull enclosing it."""
+    dirs = rng.normal(size=(n_points, 3))
+    dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-9)
+    members = centre + dirs * radius * rng.uniform(0, 0.55, (n_points, 1))
+    hull = centre + _OCTA_DIRS * radius * 1.8
+    return Lobe(members, hull, _OCTA_FACES, centre, branch)
+
+
+def _secondary(rng: np.random.Generator, parent: int, parent_pts: np.ndarray, vertex: int,
+               reach: float) -> tuple[Branch, np.ndarray]:
+    """A secondary branch from ``parent_pts[vertex]`` outwards and upwards; returns it and its tip."""
+    angle = rng.uniform(0, 2 * np.pi)
+    start = parent_pts[vertex]
+    tip = start + reach * np.array([np.cos(angle), np.sin(angle), 0.5])
+    pts = start + np.linspace(0, 1, 4)[:, None] * (tip - start)
+    return Branch(pts, np.linspace(0.015, 0.005, 4), parent, vertex, Level.SECONDARY), tip
+
+
+def _wood_points(rng: np.random.Generator, branches: list[Branch], n: int) -> np.ndarray:
+    """``n`` points scattered (1 cm) around random vertices of ``branches``."""
+    verts = np.concatenate([b.points for b in branches])
+    pick = rng.integers(0, len(verts), n)
+    return verts[pick] + rng.normal(0, 0.01, (n, 3))
+
+
+def _structure(rng: np.random.Generator, mains: list[Branch], n_lobes: int, n_points: int) -> HBL:
+    """Attach ``n_lobes`` secondary branches with lobes to ``mains`` (cycled) and scatter points."""
+    branches = list(mains)
+    lobes = []
+    leaf_n = int(n_points * 0.7) if n_lobes else 0
+    per_lobe = np.diff(np.linspace(0, leaf_n, n_lobes + 1).astype(int))
+    for k in range(n_lobes):
+        parent = k % len(mains)
+        pts = mains[parent].points
+        vertex = 2 + (k // len(mains) * 2 + k) % (len(pts) - 2)
+        sec, tip = _secondary(rng, parent, pts, vertex, rng.uniform(0.25, 0.45))
+        branches.append(sec)
+        lobes.append(make_lobe(rng, tip, rng.uniform(0.08, 0.15), int(per_lobe[k]), len(branches) - 1))
+    wood = _wood_points(rng, branches, n_points - leaf_n)
+    leaves = [lb.points for lb in lobes] or [np.zeros((0, 3))]
+    points = np.concatenate([wood, *leaves])
+    labels = np.r_[np.full(len(wood), WOOD), np.full(len(points) - len(wood), LEAF)].astype(np.uint8)
+    return HBL(mains[0].points[0], branches, lobes, points, labels)
+
+
+def make_example(rng: np.random.Generator, *, id: str | None = None, n_lobes: int = 4,
+                 curved: bool = False, species: str = "apple", source: str = "test.xyz",
+                 n_points: int = 200) -> Example:
+    """One example: a main branch (straight, or bent ~90 deg when ``curved``) with ``n_lobes`` lobes.
+
+    Descriptors come from ``describe`` and tags from ``tags_for``, so they agree with the library's.
+    """
+    ex_id = id if id is not None else f"ex-{int(rng.integers(0, 10**8)):08d}"
+    base = np.array([0.0, 0.0, 0.0])
+    pts = main_polyline(rng, base, rng.uniform(1.2, 1.8), curved)
+    main = Branch(pts, np.linspace(0.04, 0.015, len(pts)))
+    structure = _structure(rng, [main], n_lobes, n_points)
+    d = describe(structure)
+    sha = f"{int(rng.integers(0, 2**62)):064x}"
+    prov = Provenance(source, sha, species, {"N_m": 10, "K": 12, "alpha": 0.1})
+    return Example(ex_id, structure, prov, d, tags_for(d))
+
+
+def make_hbl(rng: np.random.Generator, n_main: int = 3, n_lobes: int = 8, n_points: int = 400) -> HBL:
+    """A whole tree: a trunk, ``n_main - 1`` further main branches off it, ``n_lobes`` lobes."""
+    trunk_pts = main_polyline(rng, np.zeros(3), 3.0, False, n=12)
+    mains = [Branch(trunk_pts, np.linspace(0.12, 0.03, len(trunk_pts)))]
+    for k in range(1, n_main):
+        vertex = 4 + (k * 3) % (len(trunk_pts) - 5)
+        pts = main_polyline(rng, trunk_pts[vertex], 1.2, bool(k % 2))
+        mains.append(Branch(pts, np.linspace(0.05, 0.015, len(pts)), 0, vertex, Level.MAIN))
+    return _structure(rng, mains, n_lobes, n_points)
+
+
+def assert_examples_equal(a: Example, b: Example) -> None:
+    """Every field equal and every array equal bit for bit (same dtype, shape and bytes)."""
+    meta_a, arrays_a = flatten(a)
+    meta_b, arrays_b = flatten(b)
+    assert meta_a == meta_b
+    assert sorted(arrays_a) == sorted(arrays_b)
+    for key, arr in arrays_a.items():
+        other = arrays_b[key]
+        assert arr.dtype == other.dtype and arr.shape == other.shape, key
+        assert arr.tobytes() == other.tobytes(), key
+    assert dataclasses.asdict(a.descriptors) == dataclasses.asdict(b.descriptors)
