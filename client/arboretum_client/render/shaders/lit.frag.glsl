@@ -1,0 +1,28 @@
+#version 330 core
+// Headlight (diffuse + a little specular) over a hemisphere ambient; two-sided.
+uniform vec3 u_eye;
+uniform vec3 u_sky;
+uniform vec3 u_ground;
+in vec3 v_pos;
+in vec3 v_normal;
+in vec4 v_color;
+flat in int v_id;
+#ifdef PICK
+out int f_id;
+#else
+out vec4 f_color;
+#endif
+void main() {
+#ifdef PICK
+    f_id = v_id;
+#else
+    vec3 n = normalize(v_normal);
+    vec3 v = normalize(u_eye - v_pos);
+    if (dot(n, v) < 0.0) n = -n;
+    vec3 ambient = mix(u_ground, u_sky, 0.5 + 0.5 * n.z);
+    float diffuse = max(dot(n, v), 0.0);
+    float specular = 0.12 * pow(diffuse, 40.0);
+    vec3 rgb = v_color.rgb * (0.45 * ambient + 0.62 * diffuse) + specular;
+    f_color = vec4(min(rgb, vec3(1.0)), v_color.a);
+#endif
+}

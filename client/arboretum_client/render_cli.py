@@ -1,0 +1,174 @@
+"""``arboretum render INPUT... --out img.png``: a picture of point clouds, HBL records and meshes.
+
+INPUT may be a point cloud (.xyz/.txt/.pts/.csv text with x y z first, .las/.laz/.pcd/.npy, a
+face-less .ply; read by ``arboretum_library.pointio``),
+an HBL or Example record (.npz written by ``arboretum_library.codec.save_record``), or a triangle mesh
+(.ply with faces, .obj). Several inputs are drawn together. Rendering is headless (EGL).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from arboretum_library.cli import add_json_flag, emit
+from arboretum_library.errors import InputError
+
+VIEW_CHOICES = ("front", "side", "top", "iso")
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("render", help="render point clouds, HBL records and meshes to a PNG (headless)")
+    p.add_argument("inputs", nargs="+", metavar="INPUT", help="point cloud, HBL/Example .npz, or mesh .ply/.obj")
+    p.add_argument("--out", required=True, help="PNG file to write")
+    p.add_argument("--view", choices=VIEW_CHOICES, default="iso", help="camera direction (default iso)")
+    p.add_argument("--size", default="1280x720", help="image size WIDTHxHEIGHT (default 1280x720)")
+    p.add_argument("--points", action="store_true", help="also draw an HBL's source points by label")
+    p.add_argument("--no-grid", action="store_true", help="leave out the ground grid")
+    add_json_flag(p)
+    p.set_defaults(func=run)
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """'1280x720' -> (1280, 720); InputError for anything else."""
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise InputError(f"--size: {text!r} is not WIDTHxHEIGHT, e.g. 1280x720") from None
+    if not (16 <= w <= 8192 and 16 <= h <= 8192):
+        raise InputError(f"--size: {w}x{h} is outside 16..8192 pixels per side")
+    return w, h
+
+
+def run(args: argparse.Namespace) -> int:
+    from .headless import OffscreenRenderer, save_png
+    from .scene_build import HBLStyle, combine
+
+    size = parse_size(args.size)
+    t0 = time.perf_counter()
+    style = HBLStyle(show_points=args.points, grid=False)
+    scene = combine(*(load_scene(Path(p), style) for p in args.inputs), grid=not args.no_grid)
+    with OffscreenRenderer(size) as r:
+        image = r.render(scene, view=args.view)
+        stats = r.renderer.stats
+    out = save_png(image, args.out)
+    data = {"out": str(out), "size": list(size), "view": args.view, "inputs": args.inputs,
+            "draw_calls": stats.draw_calls, "triangles": stats.triangles, "points": stats.points,
+            "seconds": round(time.perf_counter() - t0, 3)}
+    emit(args, data, f"wrote {out} ({size[0]}x{size[1]}, {args.view} view, {stats.triangles} triangles, "
+                     f"{stats.points} points)")
+    return 0
+
+
+def load_scene(path: Path, style):
+    """A Scene for one input file, chosen by its extension (and content for .ply)."""
+    from .scene_build import hbl_scene, mesh_scene, points_scene
+
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
+    ext = path.suffix.lower()
+    if ext == ".npz":
+        return hbl_scene(load_hbl(path), style)
+    if ext == ".obj":
+        return mesh_scene(*read_obj(path), grid=False)
+    if ext == ".ply":
+        verts, faces = read_ply(path)
+        if len(faces):
+            return mesh_scene(verts, faces, grid=False)
+    points, colors = read_point_cloud(path)
+    return points_scene(points, colors, grid=False)
+
+
+def load_hbl(path: Path):
+    """An HBL or Example from an .npz: ``codec.save_record`` files (``__meta__`` = {kind, schema,
+    record}) or the grow stage's HBL files (``__meta__`` = {record: 'HBL', version, meta})."""
+    import json
+
+    from arboretum_library import codec
+    from arboretum_library.errors import ArboretumError
+    from arboretum_library.model import HBL, Example
+
+    try:
+        arrays = codec.npz_to_arrays(path.read_bytes(), str(path))
+        head = json.loads(arrays.pop(codec.META_KEY).tobytes().decode())
+    except (KeyError, ValueError, ArboretumError):
+        raise InputError(f"{path}: not an Arboretum record .npz (no readable {codec.META_KEY} entry)") from None
+    types = {"HBL": HBL, "Example": Example}
+    if isinstance(head, dict) and head.get("kind") in types:
+        return codec.load_record(path, types[head["kind"]])
+    if isinstance(head, dict) and head.get("record") == "HBL" and "meta" in head:
+        try:
+            return codec.unflatten(HBL, head["meta"], arrays)
+        except ArboretumError as exc:
+            raise InputError(f"{path}: not a valid HBL ({exc})") from None
+    kind = head.get("kind", head.get("record")) if isinstance(head, dict) else None
+    raise InputError(f"{path}: holds a {kind!r} record; render reads HBL or Example records")
+
+
+def read_point_cloud(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    """Points (N, 3) and colours (N, 3) or None (from the file's colours, else its wood/leaf labels),
+    read with ``arboretum_library.pointio`` when present, else as x y z text columns."""
+    try:
+        from arboretum_library.pointio import read_points
+    except ImportError:
+        read_points = None
+    if read_points is not None:
+        cloud = read_points(path)
+        colors = getattr(cloud, "colors", None)
+        labels = getattr(cloud, "labels", None)
+        if colors is None and labels is not None:
+            from .scene_build import LEAF_COLOR, WOOD_COLOR
+
+            colors = np.where((np.asarray(labels) == 1)[:, None], LEAF_COLOR, WOOD_COLOR)
+        return np.asarray(getattr(cloud, "points", cloud), np.float64).reshape(-1, 3), colors
+    try:
+        data = np.loadtxt(path, comments="#", delimiter="," if path.suffix.lower() == ".csv" else None, ndmin=2)
+    except ValueError as exc:
+        raise InputError(f"{path}: not a text point cloud with x y z columns ({exc})") from None
+    if data.shape[1] < 3 or not len(data):
+        raise InputError(f"{path}: needs at least one row of x y z, got shape {data.shape}")
+    return data[:, :3], None
+
+
+def read_ply(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 3) and triangles (F, 3) of a .ply (polygons fan-triangulated; F = 0 for clouds)."""
+    from plyfile import PlyData
+
+    try:
+        ply = PlyData.read(str(path))
+        v = ply["vertex"]
+        verts = np.stack([v["x"], v["y"], v["z"]], axis=1).astype(np.float64)
+    except Exception as exc:  # plyfile raises several types for malformed files
+        raise InputError(f"{path}: not a readable PLY with x, y, z vertices ({exc})") from None
+    names = [e.name for e in ply.elements]
+    if "face" not in names or len(ply["face"].data) == 0:
+        return verts, np.zeros((0, 3), np.int64)
+    prop = ply["face"].data.dtype.names[0]
+    return verts, _triangulate([np.asarray(f, np.int64) for f in ply["face"].data[prop]], len(verts), path)
+
+
+def read_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 3) and triangles (F, 3) of a Wavefront .obj (v and f lines only)."""
+    verts, polys = [], []
+    for line in path.read_text(errors="replace").splitlines():
+        parts = line.split()
+        if parts and parts[0] == "v":
+            verts.append([float(x) for x in parts[1:4]])
+        elif parts and parts[0] == "f":
+            polys.append(np.array([int(p.split("/")[0]) for p in parts[1:]], np.int64))
+    if not verts or not polys:
+        raise InputError(f"{path}: an OBJ needs 'v' and 'f' lines, found {len(verts)} and {len(polys)}")
+    nv = len(verts)
+    polys = [np.where(p < 0, nv + p, p - 1) for p in polys]  # 1-based, negatives count from the end
+    return np.asarray(verts, np.float64), _triangulate(polys, nv, path)
+
+
+def _triangulate(polys: list[np.ndarray], n_verts: int, path: Path) -> np.ndarray:
+    tris = [np.stack([np.full(len(p) - 2, p[0]), p[1:-1], p[2:]], axis=1) for p in polys if len(p) >= 3]
+    faces = np.concatenate(tris) if tris else np.zeros((0, 3), np.int64)
+    if faces.size and (faces.min() < 0 or faces.max() >= n_verts):
+        raise InputError(f"{path}: a face refers to a vertex that does not exist")
+    return faces

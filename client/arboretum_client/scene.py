@@ -1,0 +1,190 @@
+"""Plain data of what to draw: no GL here, only numpy arrays in frozen records.
+
+A ``Scene`` is a list of items plus an optional ground ``Grid``. Every item carries a ``pick_id``
+(int > 0, 0 means "nothing") that the renderer writes into its ID buffer, so ``Renderer.pick`` can
+say what is under a pixel; ``Scene.names`` maps ids to human names such as ``"branch:3"``.
+
+Conventions: world frame, right-handed, Z up, metres. Colours are linear-ish RGB(A) in 0..1. Arrays
+are float32 (GPU side) and copied read-only on construction.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from arboretum_library.errors import ValidationError
+
+F32 = NDArray[np.float32]
+I32 = NDArray[np.int32]
+
+
+def _array(owner: object, name: str, dtype: type, shape: tuple) -> np.ndarray:
+    """Copy ``owner.name`` to a read-only array of ``dtype`` and check its shape (None = any)."""
+    arr = np.array(getattr(owner, name), dtype=dtype, copy=True)
+    if arr.ndim != len(shape) or any(s is not None and s != a for s, a in zip(shape, arr.shape)):
+        raise ValidationError(f"{type(owner).__name__}.{name}: bad shape {arr.shape}, expected {shape}")
+    if arr.dtype.kind == "f" and arr.size and not np.isfinite(arr).all():
+        raise ValidationError(f"{type(owner).__name__}.{name}: holds NaN or infinite values")
+    arr.flags.writeable = False
+    object.__setattr__(owner, name, arr)
+    return arr
+
+
+def _rgba(owner: object, name: str) -> None:
+    """Normalise ``owner.name`` (3 or 4 floats) to a (4,) float32 RGBA tuple-array."""
+    c = np.array(getattr(owner, name), dtype=np.float32).reshape(-1)
+    if c.shape not in ((3,), (4,)):
+        raise ValidationError(f"{type(owner).__name__}.{name}: expected RGB or RGBA, got {c.shape}")
+    object.__setattr__(owner, name, np.append(c, 1.0).astype(np.float32)[:4] if len(c) == 3 else c)
+
+
+@dataclass(frozen=True, eq=False)
+class PointSet:
+    """Points drawn as round screen-space dots."""
+
+    points: F32
+    """(N, 3) float32, metres, world frame."""
+    colors: F32
+    """(N, 3) float32 RGB in 0..1, one per point."""
+    size_px: float = 3.0
+    """Dot diameter in output pixels."""
+    pick_id: int = 0
+
+    def __post_init__(self) -> None:
+        pts = _array(self, "points", np.float32, (None, 3))
+        _array(self, "colors", np.float32, (len(pts), 3))
+
+
+@dataclass(frozen=True, eq=False)
+class Polyline:
+    """A polyline drawn as a tube (with per-vertex radii) or as a thick screen-space line."""
+
+    points: F32
+    """(N, 3) float32, metres, N >= 2."""
+    radii: F32
+    """(N,) float32, metres: tube radius per vertex (ignored for ``style='line'``)."""
+    color: F32 = field(default_factory=lambda: np.array([0.1, 0.1, 0.1, 1.0], np.float32))
+    """(4,) float32 RGBA (alpha must be 1: tubes are opaque)."""
+    style: str = "tube"
+    """'tube' (8-sided CPU tube mesh) or 'line' (screen-space line ``width_px`` wide)."""
+    width_px: float = 2.0
+    """Line width in output pixels for ``style='line'``."""
+    pick_id: int = 0
+
+    def __post_init__(self) -> None:
+        pts = _array(self, "points", np.float32, (None, 3))
+        if len(pts) < 2:
+            raise ValidationError(f"Polyline.points: needs >= 2 vertices, got {len(pts)}")
+        _array(self, "radii", np.float32, (len(pts),))
+        _rgba(self, "color")
+        if self.style not in ("tube", "line"):
+            raise ValidationError(f"Polyline.style: {self.style!r} is not 'tube' or 'line'")
+
+
+@dataclass(frozen=True, eq=False)
+class Mesh:
+    """A triangle mesh with one colour; translucent when ``color[3] < 1``."""
+
+    vertices: F32
+    """(V, 3) float32, metres."""
+    faces: I32
+    """(F, 3) int32 indices into ``vertices``, counter-clockwise seen from outside."""
+    color: F32 = field(default_factory=lambda: np.array([0.7, 0.7, 0.7, 1.0], np.float32))
+    """(4,) float32 RGBA."""
+    pick_id: int = 0
+
+    def __post_init__(self) -> None:
+        verts = _array(self, "vertices", np.float32, (None, 3))
+        faces = _array(self, "faces", np.int32, (None, 3))
+        _rgba(self, "color")
+        if faces.size and (faces.min() < 0 or faces.max() >= len(verts)):
+            raise ValidationError(f"Mesh.faces: indices must lie in 0..{len(verts) - 1}")
+
+    @property
+    def translucent(self) -> bool:
+        return bool(self.color[3] < 1.0)
+
+
+@dataclass(frozen=True, eq=False)
+class InstancedMesh:
+    """One opaque mesh drawn N times (one draw call), e.g. leaves or modules."""
+
+    mesh: Mesh
+    """The shared mesh (its colour is used where ``colors`` is None)."""
+    matrices: F32
+    """(N, 4, 4) float32: T_world_instance for each instance (row-major, column vectors)."""
+    colors: F32 | None = None
+    """(N, 3) float32 RGB per instance, or None for ``mesh.color``."""
+
+    def __post_init__(self) -> None:
+        m = _array(self, "matrices", np.float32, (None, 4, 4))
+        if self.colors is not None:
+            _array(self, "colors", np.float32, (len(m), 3))
+
+    @property
+    def pick_id(self) -> int:
+        return self.mesh.pick_id
+
+
+@dataclass(frozen=True)
+class Grid:
+    """A square ground grid in the plane z = ``z``."""
+
+    center: tuple[float, float] = (0.0, 0.0)
+    """(x, y) metres of the grid centre."""
+    half_size: float = 5.0
+    """Half the side length, metres."""
+    spacing: float = 1.0
+    """Distance between lines, metres."""
+    z: float = 0.0
+    color: tuple[float, float, float, float] = (0.55, 0.57, 0.6, 1.0)
+
+
+Item = PointSet | Polyline | Mesh | InstancedMesh
+
+
+@dataclass(frozen=True)
+class Scene:
+    """Everything to draw in one frame."""
+
+    items: tuple[Any, ...] = ()
+    """PointSet, Polyline, Mesh and InstancedMesh records."""
+    grid: Grid | None = None
+    names: dict[int, str] = field(default_factory=dict)
+    """pick_id -> a name such as 'branch:0' or 'lobe:2'."""
+
+    def bounds(self) -> np.ndarray:
+        """(2, 3) float64: min and max corner of every item (the grid excluded)."""
+        pts = [_item_points(it) for it in self.items]
+        pts = [p for p in pts if len(p)]
+        if not pts:
+            return np.array([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]])
+        allp = np.concatenate(pts).astype(np.float64)
+        return np.stack([allp.min(axis=0), allp.max(axis=0)])
+
+
+def _item_points(item: Any) -> np.ndarray:
+    if isinstance(item, PointSet | Polyline):
+        return item.points
+    if isinstance(item, Mesh):
+        return item.vertices
+    if isinstance(item, InstancedMesh):
+        return item.matrices[:, :3, 3]
+    raise TypeError(f"not a scene item: {type(item).__name__}")
+
+
+def grid_for_bounds(bounds: np.ndarray) -> Grid:
+    """A ground grid under ``bounds`` (2, 3), twice as wide as the object, with a round spacing."""
+    lo, hi = np.asarray(bounds, dtype=np.float64)
+    half = float(max(hi[0] - lo[0], hi[1] - lo[1], (hi[2] - lo[2]) * 0.5, 1e-3))
+    step = 10.0 ** np.floor(np.log10(half / 4))
+    for mult in (1.0, 2.0, 5.0):
+        if half / (step * mult) <= 10:
+            step *= mult
+            break
+    centre = (lo[:2] + hi[:2]) / 2
+    return Grid(center=(float(centre[0]), float(centre[1])), half_size=half * 1.5, spacing=float(step), z=float(lo[2]))

@@ -1,0 +1,123 @@
+"""Scenes from library records and plain arrays: HBL structures, point clouds, triangle meshes.
+
+Colours follow the VRTree paper's figures: main branches red, secondary branches black; each lobe is a
+translucent hull in its own colour from ``LOBE_PALETTE`` (cycled); source points by label (wood brown,
+leaf green). Pick ids are assigned in order and named in ``Scene.names`` ('branch:3', 'lobe:0', ...).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from arboretum_library.model import HBL, LEAF, Example, Level
+
+from .scene import InstancedMesh, Mesh, PointSet, Polyline, Scene, grid_for_bounds
+
+BRANCH_COLORS: dict[Level, tuple[float, float, float]] = {
+    Level.MAIN: (0.82, 0.08, 0.08),
+    Level.SECONDARY: (0.06, 0.06, 0.06),
+    Level.TWIG: (0.36, 0.25, 0.15),
+}
+"""Branch colour per level (VRTree Fig. 3: main red, secondary black)."""
+
+LOBE_PALETTE: tuple[tuple[float, float, float], ...] = (
+    (0.12, 0.47, 0.71), (1.00, 0.50, 0.05), (0.17, 0.63, 0.17), (0.58, 0.40, 0.74),
+    (0.09, 0.75, 0.81), (0.74, 0.74, 0.13), (0.89, 0.47, 0.76), (0.55, 0.34, 0.29),
+    (0.00, 0.50, 0.50), (0.98, 0.75, 0.10), (0.40, 0.65, 1.00), (0.60, 0.80, 0.30),
+)
+"""Distinct lobe colours (no red or black, which mean branches), used in order and cycled."""
+
+WOOD_COLOR = (0.45, 0.30, 0.16)
+LEAF_COLOR = (0.25, 0.62, 0.20)
+POINT_COLOR = (0.20, 0.30, 0.45)
+
+
+@dataclass(frozen=True)
+class HBLStyle:
+    """How an HBL is drawn."""
+
+    min_radius_fraction: float = 0.003
+    """Smallest drawn tube radius as a fraction of the structure's bounding-box diagonal."""
+    lobe_alpha: float = 0.3
+    """Opacity of lobe hulls (0..1)."""
+    show_points: bool = False
+    """Also draw the source points, coloured by label."""
+    point_px: float = 2.0
+    """Dot size of source points in pixels."""
+    grid: bool = True
+    """Draw a ground grid under the structure."""
+
+
+def _diagonal(hbl: HBL) -> float:
+    pts = [b.points for b in hbl.branches] + [lb.hull_vertices for lb in hbl.lobes] + [hbl.points]
+    allp = np.concatenate([np.asarray(p).reshape(-1, 3) for p in pts] + [hbl.root[None]])
+    return float(np.linalg.norm(allp.max(axis=0) - allp.min(axis=0)))
+
+
+def hbl_items(hbl: HBL | Example, style: HBLStyle = HBLStyle(), first_id: int = 1):
+    """Items and id names for an HBL (or an Example's structure): branch tubes, lobe hulls, points."""
+    hbl = hbl.structure if isinstance(hbl, Example) else hbl
+    min_r = style.min_radius_fraction * max(_diagonal(hbl), 1e-6)
+    items, names, pid = [], {}, first_id
+    for i, b in enumerate(hbl.branches):
+        items.append(Polyline(points=_f32(b.points), radii=_f32(np.maximum(b.radii, min_r)),
+                              color=_f32(BRANCH_COLORS[b.level]), pick_id=pid))
+        names[pid], pid = f"branch:{i}", pid + 1
+    for j, lobe in enumerate(hbl.lobes):
+        color = _f32((*LOBE_PALETTE[j % len(LOBE_PALETTE)], style.lobe_alpha))
+        items.append(Mesh(vertices=_f32(lobe.hull_vertices), faces=lobe.hull_faces, color=color, pick_id=pid))
+        names[pid], pid = f"lobe:{j}", pid + 1
+    if style.show_points and len(hbl.points):
+        colors = _f32(np.where((hbl.labels == LEAF)[:, None], LEAF_COLOR, WOOD_COLOR))
+        items.append(PointSet(points=_f32(hbl.points), colors=colors, size_px=style.point_px, pick_id=pid))
+        names[pid] = "points"
+    return items, names
+
+
+def hbl_scene(hbl: HBL | Example, style: HBLStyle = HBLStyle()) -> Scene:
+    """A Scene of one HBL structure (with a ground grid when ``style.grid``)."""
+    items, names = hbl_items(hbl, style)
+    return _with_grid(Scene(items=tuple(items), names=names), style.grid)
+
+
+def points_scene(points: np.ndarray, colors: np.ndarray | None = None, size_px: float = 2.0,
+                 grid: bool = True) -> Scene:
+    """A Scene of a point cloud (N, 3); ``colors`` (N, 3) in 0..1, or one colour for all."""
+    pts = _f32(points).reshape(-1, 3)
+    cols = _f32(np.broadcast_to(POINT_COLOR, pts.shape) if colors is None else colors)
+    item = PointSet(points=pts, colors=cols, size_px=size_px, pick_id=1)
+    return _with_grid(Scene(items=(item,), names={1: "points"}), grid)
+
+
+def mesh_scene(vertices: np.ndarray, faces: np.ndarray, color=(0.62, 0.55, 0.45, 1.0), grid: bool = True) -> Scene:
+    """A Scene of one triangle mesh: vertices (V, 3), faces (F, 3)."""
+    item = Mesh(vertices=_f32(vertices), faces=np.asarray(faces, np.int32), color=_f32(color), pick_id=1)
+    return _with_grid(Scene(items=(item,), names={1: "mesh"}), grid)
+
+
+def _f32(values) -> np.ndarray:
+    """float32 array of ``values`` (the GPU-side dtype of scene records)."""
+    return np.asarray(values, dtype=np.float32)
+
+
+def _with_grid(scene: Scene, grid: bool) -> Scene:
+    return dataclasses.replace(scene, grid=grid_for_bounds(scene.bounds()) if grid and scene.items else None)
+
+
+def _renumber(item, offset: int):
+    if isinstance(item, InstancedMesh):
+        return dataclasses.replace(item, mesh=_renumber(item.mesh, offset))
+    return dataclasses.replace(item, pick_id=item.pick_id + offset if item.pick_id else 0)
+
+
+def combine(*scenes: Scene, grid: bool = True) -> Scene:
+    """One Scene holding the items of ``scenes``, pick ids renumbered to stay unique."""
+    items, names, offset = [], {}, 0
+    for sc in scenes:
+        items += [_renumber(it, offset) for it in sc.items]
+        names.update({k + offset: v for k, v in sc.names.items()})
+        offset += max([0, *sc.names, *(it.pick_id for it in sc.items)])
+    return _with_grid(Scene(items=tuple(items), names=names), grid)
