@@ -30,15 +30,24 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"arboretum {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for ep in sorted(entry_points(group=GROUP), key=lambda e: e.name):
+    register_extensions(sub, GROUP)
+    return parser
+
+
+def register_extensions(sub: argparse._SubParsersAction, group: str) -> None:
+    """Let other packages add actions to a subcommand through the entry-point ``group``.
+
+    How ``arboretum library build`` (which needs Dask, a server dependency) joins the library's own
+    ``library`` command without the library importing the server.
+    """
+    for ep in sorted(entry_points(group=group), key=lambda e: e.name):
         try:
             register = ep.load()
-        except ImportError as exc:  # an extra that is not installed: say so, keep the rest
+        except ImportError as exc:
             p = sub.add_parser(ep.name, help=f"(unavailable: {exc.name} is not installed)")
             p.set_defaults(func=_unavailable(ep.name, str(exc)))
             continue
         register(sub)
-    return parser
 
 
 def _unavailable(name: str, why: str):

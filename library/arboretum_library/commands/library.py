@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from arboretum_library.cli import add_json_flag, emit
+from arboretum_library.cli import add_json_flag, emit, register_extensions
 
 
 def register(subparsers: Any) -> None:
@@ -47,6 +47,7 @@ def register(subparsers: Any) -> None:
     for p in sub.choices.values():
         add_json_flag(p)
         p.set_defaults(func=run)
+    register_extensions(sub, "arboretum.library_commands")
 
 
 def run(args: argparse.Namespace) -> int:
