@@ -1,0 +1,128 @@
+"""``arboretum scan``: look at and convert point cloud files.
+
+``scan info FILE...`` prints counts, extent, height, up axis and point spacing of each file;
+``scan convert IN OUT`` reads with the preparation options (up axis, recentre, height, max points) and
+writes any writable format. Add a subcommand by writing ``_add_NAME(sub)`` and calling it in ``register``.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from arboretum_library.cli import add_json_flag, emit
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser("scan", help="inspect and convert point cloud files (scans)")
+    sub = parser.add_subparsers(dest="scan_command", metavar="SUBCOMMAND")
+    parser.set_defaults(func=lambda args: _usage(parser))
+    _add_info(sub)
+    _add_convert(sub)
+
+
+def _usage(parser: argparse.ArgumentParser) -> int:
+    parser.print_help()
+    return 1
+
+
+def _add_up(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--up",
+        choices=("auto", "z", "y"),
+        default="auto",
+        help="up axis of the file: auto-detect (default), z, or y (converted to Z up)",
+    )
+
+
+def _add_info(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "info",
+        help="print point count, extent, height, up axis and spacing of scans",
+        description="Print point count, extent, height, up axis (and the guess) and median point spacing.",
+    )
+    p.add_argument(
+        "files", nargs="+", metavar="FILE", help=".xyz .txt .csv .asc .pts .ply .pcd .las .laz .npy"
+    )
+    _add_up(p)
+    add_json_flag(p)
+    p.set_defaults(func=run_info)
+
+
+def _add_convert(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "convert",
+        help="read a scan, prepare it (up axis, recentre, height, thinning) and write it",
+        description="Read IN, optionally recentre / scale / thin it, and write OUT (.ply .xyz .txt .npy). "
+        "VRTree's preparation is: --recentre --height 0.8 --max-points 12000.",
+    )
+    p.add_argument("input", metavar="IN", help="point cloud file to read")
+    p.add_argument("output", metavar="OUT", help="file to write (.ply .xyz .txt .npy)")
+    _add_up(p)
+    p.add_argument("--recentre", action="store_true", help="move the trunk base to the origin")
+    p.add_argument(
+        "--height", type=float, default=None, metavar="M", help="scale uniformly to this height (m)"
+    )
+    p.add_argument(
+        "--max-points", type=int, default=None, metavar="N", help="thin evenly to at most N points"
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of the thinning (default 0)")
+    add_json_flag(p)
+    p.set_defaults(func=run_convert)
+
+
+def run_info(args: argparse.Namespace) -> int:
+    from arboretum_library.pointio import ReadOptions, read_points, scan_stats
+
+    options = ReadOptions(up=args.up)
+    stats = [scan_stats(read_points(f, options)) for f in args.files]
+    emit(args, stats, "\n\n".join(format_stats(s) for s in stats))
+    return 0
+
+
+def format_stats(s: dict) -> str:
+    """Human text of one ``scan_stats`` dict."""
+    extent = "  ".join(
+        f"{a} {lo:.3f} .. {hi:.3f} ({size:.3f} m)"
+        for a, lo, hi, size in zip("xyz", s["min"], s["max"], s["size"])
+    )
+    attrs = [
+        name
+        for key, name in (
+            ("has_colors", "colors"),
+            ("has_labels", "labels"),
+            ("has_branch_ids", "branch ids"),
+        )
+        if s[key]
+    ]
+    lines = [
+        s["file"],
+        f"  points     {s['points']:,}",
+        f"  extent     {extent}",
+        f"  height     {s['height']:.3f} m",
+        f"  up axis    {s['up_axis']} (guess {s['up_guess']}, confidence {s['up_confidence']:.2f})",
+        f"  spacing    {s['spacing'] * 1000:.1f} mm (median nearest-neighbour distance)",
+        f"  attributes {', '.join(attrs) if attrs else 'none'}",
+    ]
+    if "leaf_fraction" in s:
+        lines.append(f"  leaf       {s['leaf_fraction'] * 100:.1f}% of points")
+    return "\n".join(lines)
+
+
+def run_convert(args: argparse.Namespace) -> int:
+    from arboretum_library.pointio import ReadOptions, read_points, scan_stats, write_points
+
+    options = ReadOptions(
+        up=args.up,
+        recentre=args.recentre,
+        target_height=args.height,
+        max_points=args.max_points,
+        seed=args.seed,
+    )
+    cloud = read_points(args.input, options)
+    out = write_points(args.output, cloud)
+    stats = scan_stats(cloud)
+    stats["file"] = str(out)
+    stats["input"] = args.input
+    text = f"wrote {out}: {len(cloud):,} points, height {stats['height']:.3f} m (from {args.input}, up {cloud.up_axis})"
+    emit(args, stats, text)
+    return 0

@@ -1,0 +1,489 @@
+"""Per-format readers and writers behind ``pointio.read_points`` / ``pointio.write_points``.
+
+A reader takes a path and returns a ``Raw`` dict: ``points`` (N, 3) float64 (not yet checked for
+finiteness), optional ``colors`` (N, 3) float in [0, 1], ``labels`` (N,) and ``branch_ids`` (N,). Text
+readers refuse NaN/infinite rows themselves, naming the line. A problem with the file raises ``InputError`` naming it. Writers take an open binary file and the validated arrays.
+"""
+
+from __future__ import annotations
+
+import io
+import re
+import struct
+import warnings
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+
+from .errors import InputError
+
+Raw = dict[str, Any]
+
+LABEL_NAMES = ("label", "labels", "classification", "class")
+BRANCH_NAMES = ("branch_id", "branch_ids", "branchid", "branch")
+COLOR_NAMES = (
+    ("red", "green", "blue"),
+    ("r", "g", "b"),
+    ("diffuse_red", "diffuse_green", "diffuse_blue"),
+)
+MAX_HEADER_LINES = 100
+
+
+def fail(path: Path, problem: str) -> InputError:
+    """The one error a reader raises: ``'FILE': problem``."""
+    return InputError(f"'{path}': {problem}")
+
+
+# ---------------------------------------------------------------- attributes by name / by range
+
+
+def scale_colors(rgb: np.ndarray, full: float | None = None) -> np.ndarray | None:
+    """(N, 3) colours scaled to [0, 1]: as is when all lie in 0..1, /255 in 0..255, /``full``; else None."""
+    rgb = np.asarray(rgb, dtype=np.float64)
+    if rgb.size == 0 or not np.isfinite(rgb).all() or rgb.min() < 0:
+        return None
+    top = float(rgb.max())
+    for limit in (1.0, 255.0, full):
+        if limit is not None and top <= limit:
+            return (rgb / limit).astype(np.float32)
+    return None
+
+
+def from_named(path: Path, columns: dict[str, np.ndarray]) -> Raw:
+    """A ``Raw`` cloud from columns named like PLY properties (x, y, z, red..., label, branch_id)."""
+    cols = {k.lower(): v for k, v in columns.items()}
+    if not all(k in cols for k in "xyz"):
+        raise fail(path, f"needs x, y and z values, found {sorted(cols)}")
+    raw: Raw = {"points": np.stack([np.asarray(cols[k], np.float64) for k in "xyz"], axis=1)}
+    for names in COLOR_NAMES:
+        if all(n in cols for n in names):
+            is_u16 = np.asarray(cols[names[0]]).dtype == np.uint16
+            rgb = np.stack([cols[n] for n in names], axis=1)
+            raw["colors"] = scale_colors(rgb, 65535.0 if is_u16 else None)
+            break
+    for key, names in (("labels", LABEL_NAMES), ("branch_ids", BRANCH_NAMES)):
+        found = next((n for n in names if n in cols), None)
+        if found is not None:
+            raw[key] = integer_column(path, found, cols[found])
+    if "labels" in raw:
+        check_labels(path, raw["labels"])
+    return raw
+
+
+def integer_column(path: Path, name: str, values: np.ndarray) -> np.ndarray:
+    """``values`` as int64, or InputError when they are not whole numbers."""
+    v = np.asarray(values)
+    if v.dtype.kind == "f":
+        if not np.isfinite(v).all() or (v != np.round(v)).any():
+            raise fail(path, f"column '{name}' holds values that are not whole numbers")
+    return v.astype(np.int64)
+
+
+def check_labels(path: Path, labels: np.ndarray) -> None:
+    bad = np.setdiff1d(np.unique(labels), [0, 1])
+    if bad.size:
+        shown = ", ".join(str(int(b)) for b in bad[:5])
+        raise fail(path, f"labels must be 0 (wood) or 1 (leaf); found {shown}")
+
+
+def from_table(
+    path: Path, table: np.ndarray, names: list[str] | None = None, rgb_at: int = 3
+) -> Raw:
+    """A ``Raw`` cloud from an (N, C>=3) table; ``names`` (C,) from a header, if any.
+
+    Unnamed colours are taken from columns ``rgb_at`` .. ``rgb_at + 2`` when their values all lie in
+    0..1 or 0..255 (and those columns are not named as something else).
+    """
+    raw: Raw = {"points": table[:, :3]}
+    if names is not None and len(names) == table.shape[1] and all(k in names for k in "xyz"):
+        raw = from_named(path, dict(zip(names, table.T)))
+        claimed = set(LABEL_NAMES + BRANCH_NAMES + ("x", "y", "z"))
+        if "colors" in raw or claimed & set(names[rgb_at : rgb_at + 3]):
+            return raw
+    if table.shape[1] >= rgb_at + 3:
+        raw["colors"] = scale_colors(table[:, rgb_at : rgb_at + 3])
+    return raw
+
+
+# ---------------------------------------------------------------- text (.xyz .txt .csv .asc)
+
+
+def _is_number(token: bytes) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
+
+
+def _header_names(line: bytes) -> list[str]:
+    text = line.decode("utf-8", "replace").strip().lstrip("/#").strip()
+    return [t.strip("\"' ").lower() for t in re.split(r"[,;\s]+", text) if t.strip("\"' ")]
+
+
+def read_text(path: Path) -> Raw:
+    """Whitespace-, comma- or semicolon-separated rows; non-numeric lines before the data are a header.
+
+    A first numeric line holding one number (the point count of Leica .pts files) is skipped. In a
+    7-column .pts file (x y z intensity r g b) the colours are columns 4-6, otherwise columns 3-5.
+    """
+    data = path.read_bytes()
+    lines = data.removeprefix(b"\xef\xbb\xbf").splitlines()
+    names, start = None, None
+    for i, line in enumerate(lines[:MAX_HEADER_LINES]):
+        s = line.strip()
+        if not s or s.startswith(b"#"):
+            continue
+        tokens = [t for t in re.split(rb"[,;\s]+", s) if t]
+        if all(_is_number(t) for t in tokens):
+            start = i + 1 if len(tokens) == 1 and i + 1 < len(lines) else i
+            break
+        names = _header_names(s)
+    if start is None:
+        what = (
+            "no numeric rows in its first 100 lines"
+            if len(lines) > MAX_HEADER_LINES
+            else "no points"
+        )
+        raise fail(path, f"holds {what}")
+    table = parse_table(path, lines[start:], start + 1)
+    rgb_at = 4 if path.suffix.lower() == ".pts" and table.shape[1] == 7 else 3
+    return from_table(path, table, names, rgb_at)
+
+
+def parse_table(path: Path, lines: list[bytes], first_line: int) -> np.ndarray:
+    """Numbers of ``lines`` (the first is line ``first_line``) as an (R, C>=3) float64 table.
+
+    numpy's C parser (``np.loadtxt``) reads well-formed data; anything it refuses is parsed again line
+    by line to say what is wrong where. Rows with NaN or infinite values are refused with their line.
+    """
+    body = b"\n".join(lines)
+    delimiter = "," if b"," in body else ";" if b";" in body else None
+    try:
+        with warnings.catch_warnings():  # "input contained no data": said below, as an InputError
+            warnings.simplefilter("ignore", UserWarning)
+            table = np.loadtxt(io.BytesIO(body), delimiter=delimiter, ndmin=2)
+    except ValueError:
+        table = np.zeros((0, 0))
+    if table.shape[1] < 3 or not len(table):
+        table = _parse_carefully(path, _rows(body), first_line)
+    bad = ~np.isfinite(table).all(axis=1)
+    if bad.any():
+        numbers = [first_line + i for i, r in enumerate(_rows(body)) if r.strip()]
+        raise fail(
+            path,
+            f"{int(bad.sum())} point(s) have NaN or infinite values (first on line {numbers[int(np.argmax(bad))]})",
+        )
+    return table
+
+
+def _rows(body: bytes) -> list[bytes]:
+    """The lines of ``body`` with delimiters turned to spaces and ``#`` comments removed."""
+    if b"," in body or b";" in body:
+        body = body.replace(b",", b" ").replace(b";", b" ")
+    rows = body.split(b"\n")
+    return [r.split(b"#", 1)[0] for r in rows] if b"#" in body else rows
+
+
+def _parse_carefully(path: Path, rows: list[bytes], first_line: int) -> np.ndarray:
+    """The table of ``rows``, or InputError naming the first line that is wrong and how."""
+    counts = np.array([len(r.split()) for r in rows], dtype=np.int64)
+    keep = np.flatnonzero(counts > 0)
+    if not keep.size:
+        raise fail(path, "holds no points")
+    ncols = int(counts[keep[0]])
+    if ncols < 3:
+        raise fail(
+            path, f"line {first_line + keep[0]} has {ncols} column(s); x, y and z need at least 3"
+        )
+    ragged = keep[counts[keep] != ncols]
+    if ragged.size:
+        i = int(ragged[0])
+        raise fail(
+            path,
+            f"line {first_line + i} has {counts[i]} values, expected {ncols} like line {first_line + keep[0]}",
+        )
+    try:
+        tokens = b" ".join(rows).split()
+        values = np.fromiter(map(float, tokens), dtype=np.float64, count=len(tokens))
+    except ValueError:
+        i, token = next((i, t) for i, r in enumerate(rows) for t in r.split() if not _is_number(t))
+        raise fail(
+            path, f"line {first_line + i}: '{token.decode('utf-8', 'replace')}' is not a number"
+        ) from None
+    return values.reshape(-1, ncols)
+
+
+# ---------------------------------------------------------------- PLY, LAS/LAZ, NPY
+
+
+def read_ply(path: Path) -> Raw:
+    from plyfile import PlyData
+
+    try:
+        with open(path, "rb") as f:
+            ply = PlyData.read(f, mmap="")  # falsy: no memory map
+        vertex = ply["vertex"]
+        columns = {p.name: np.asarray(vertex[p.name]) for p in vertex.properties}
+    except KeyError:
+        raise fail(path, "has no 'vertex' element") from None
+    except Exception as exc:  # plyfile raises many types for a corrupt file
+        raise fail(path, f"is not a readable PLY file ({_short(exc)})") from None
+    return from_named(path, columns)
+
+
+def read_las(path: Path) -> Raw:
+    import laspy
+
+    try:
+        las = laspy.read(str(path))
+        points = np.asarray(las.xyz, dtype=np.float64)
+    except Exception as exc:  # laspy / lazrs raise many types for a corrupt file
+        raise fail(path, f"is not a readable LAS/LAZ file ({_short(exc)})") from None
+    if len(points) != las.header.point_count:
+        raise fail(
+            path,
+            f"is truncated: its header promises {las.header.point_count} points, found {len(points)}",
+        )
+    raw: Raw = {"points": points}
+    dims = set(las.point_format.dimension_names)
+    if {"red", "green", "blue"} <= dims:
+        rgb = np.stack([np.asarray(las[c]) for c in ("red", "green", "blue")], axis=1)
+        raw["colors"] = scale_colors(rgb, 65535.0)
+    return raw
+
+
+def read_npy(path: Path) -> Raw:
+    try:
+        arr = np.load(path, allow_pickle=False)
+    except Exception as exc:  # truncated, not an .npy, or an object array
+        raise fail(path, f"is not a readable .npy array ({_short(exc)})") from None
+    if arr.dtype.names:
+        return from_named(path, {n: arr[n] for n in arr.dtype.names})
+    if arr.ndim != 2 or arr.dtype.kind not in "fiu":
+        raise fail(path, f"expected an (N, 3+) numeric array, got shape {arr.shape} of {arr.dtype}")
+    if arr.shape[1] < 3:
+        raise fail(path, f"has {arr.shape[1]} column(s); x, y and z need at least 3")
+    return from_table(path, arr.astype(np.float64))
+
+
+def _short(exc: Exception) -> str:
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text if len(text) <= 120 else text[:117] + "..."
+
+
+# ---------------------------------------------------------------- PCD v0.7 (ascii, binary)
+
+_PCD_TYPES = {"F": "f", "U": "u", "I": "i"}
+
+
+def _pcd_header(path: Path, data: bytes) -> tuple[dict[str, list[str]], int, int]:
+    """Header fields, the byte offset of the data and the number of header lines."""
+    header: dict[str, list[str]] = {}
+    pos, nlines = 0, 0
+    while pos < len(data) and nlines < MAX_HEADER_LINES:
+        end = data.find(b"\n", pos)
+        end = len(data) if end < 0 else end
+        line = data[pos:end].decode("ascii", "replace").strip()
+        pos, nlines = end + 1, nlines + 1
+        if not line or line.startswith("#"):
+            continue
+        key, *values = line.split()
+        header[key.upper()] = values
+        if key.upper() == "DATA":
+            return header, pos, nlines
+    raise fail(path, "is not a PCD file: no DATA line in its header")
+
+
+def _pcd_dtype(path: Path, header: dict[str, list[str]]) -> np.dtype:
+    fields = header.get("FIELDS", [])
+    sizes = header.get("SIZE", [])
+    types = header.get("TYPE", [])
+    counts = header.get("COUNT", ["1"] * len(fields))
+    if not fields or not len(fields) == len(sizes) == len(types) == len(counts):
+        raise fail(
+            path, "PCD header: FIELDS, SIZE, TYPE and COUNT must list the same number of fields"
+        )
+    spec = []
+    for i, (name, size, kind, count) in enumerate(zip(fields, sizes, types, counts)):
+        if kind.upper() not in _PCD_TYPES:
+            raise fail(path, f"PCD header: unknown TYPE {kind!r} for field {name!r}")
+        base = f"<{_PCD_TYPES[kind.upper()]}{size}"
+        spec.append(
+            (f"{name}_{i}" if name == "_" else name, base, (int(count),) if int(count) > 1 else ())
+        )
+    return np.dtype(spec)
+
+
+def read_pcd(path: Path) -> Raw:
+    data = path.read_bytes()
+    if not data:
+        raise fail(path, "is empty: no points")
+    header, offset, nlines = _pcd_header(path, data)
+    try:
+        dtype = _pcd_dtype(path, header)
+        npoints = int(header.get("POINTS", ["0"])[0])
+    except (ValueError, TypeError):
+        raise fail(path, "PCD header has a malformed SIZE, TYPE, COUNT or POINTS value") from None
+    mode = header["DATA"][0].lower() if header["DATA"] else ""
+    if mode == "ascii":
+        table = read_text_table(path, data[offset:], nlines)
+        want = sum(int(np.prod(dtype[n].shape)) for n in dtype.names or ())
+        if table.shape[1] != want:
+            raise fail(
+                path,
+                f"PCD rows hold {table.shape[1]} values, but its FIELDS and COUNT describe {want}",
+            )
+        columns, col = {}, 0
+        for name in dtype.names or ():
+            count = int(np.prod(dtype[name].shape))  # 1 for a scalar field
+            columns[name] = table[:, col].astype(dtype[name].base) if count == 1 else None
+            col += count
+        if len(table) != npoints:
+            raise fail(
+                path, f"its PCD header promises {npoints} points, the data holds {len(table)}"
+            )
+    elif mode == "binary":
+        if len(data) - offset < npoints * dtype.itemsize:
+            raise fail(
+                path,
+                f"is truncated: {npoints} points need {npoints * dtype.itemsize} bytes of data, found {len(data) - offset}",
+            )
+        table = np.frombuffer(data, dtype=dtype, count=npoints, offset=offset)
+        columns = {n: table[n] for n in dtype.names or ()}
+    elif mode == "binary_compressed":
+        columns = _pcd_compressed(path, data[offset:], dtype, npoints)
+    else:
+        raise fail(
+            path, f"unknown PCD DATA mode {mode!r} (expected ascii, binary or binary_compressed)"
+        )
+    return _pcd_raw(path, columns)
+
+
+def _pcd_compressed(
+    path: Path, data: bytes, dtype: np.dtype, npoints: int
+) -> dict[str, np.ndarray]:
+    """Columns of LZF-compressed PCD data: two uint32 sizes, then each field's values one after another."""
+    if len(data) < 8:
+        raise fail(path, "is truncated: the compressed PCD data has no size header")
+    packed, unpacked = struct.unpack("<II", data[:8])
+    if len(data) - 8 < packed:
+        raise fail(
+            path, f"is truncated: {packed} bytes of compressed data expected, found {len(data) - 8}"
+        )
+    if unpacked != npoints * dtype.itemsize:
+        raise fail(
+            path,
+            f"compressed PCD data unpacks to {unpacked} bytes, {npoints} points need {npoints * dtype.itemsize}",
+        )
+    raw = lzf_decompress(data[8 : 8 + packed], unpacked)
+    if len(raw) != unpacked:
+        raise fail(path, "compressed PCD data is corrupt")
+    columns, pos = {}, 0
+    for name in dtype.names or ():
+        field = dtype[name]
+        columns[name] = np.frombuffer(
+            raw, dtype=field.base, count=npoints * max(1, int(np.prod(field.shape))), offset=pos
+        )
+        pos += npoints * field.itemsize
+    return columns
+
+
+def lzf_decompress(src: bytes, size: int) -> bytes:
+    """Decompress LZF (liblzf's format, as in PCD 'binary_compressed') to at most ``size`` bytes."""
+    out = bytearray()
+    i, n = 0, len(src)
+    while i < n and len(out) <= size:
+        ctrl = src[i]
+        i += 1
+        if ctrl < 32:  # a literal run of ctrl + 1 bytes
+            out += src[i : i + ctrl + 1]
+            i += ctrl + 1
+            continue
+        length = ctrl >> 5
+        if length == 7:
+            length += src[i] if i < n else 0
+            i += 1
+        start = len(out) - ((ctrl & 0x1F) << 8) - (src[i] if i < n else 0) - 1
+        i += 1
+        length += 2
+        if start < 0:
+            break
+        if start + length <= len(out):
+            out += out[start : start + length]
+        else:  # the copy overlaps what it produces
+            for k in range(length):
+                out.append(out[start + k])
+    return bytes(out)
+
+
+def read_text_table(path: Path, data: bytes, first_line: int) -> np.ndarray:
+    lines = data.splitlines()
+    if not any(ln.strip() for ln in lines):
+        raise fail(path, "holds no points")
+    return parse_table(path, lines, first_line + 1)
+
+
+def _pcd_raw(path: Path, columns: dict[str, Any]) -> Raw:
+    named = {k: v for k, v in columns.items() if v is not None and k.lower() not in ("rgb", "rgba")}
+    raw = from_named(path, named)
+    packed = next((columns[k] for k in columns if k.lower() in ("rgb", "rgba")), None)
+    if packed is not None:
+        bits = np.asarray(packed)
+        # PCL packs 8-bit r, g, b into the bits of one float32 (TYPE F) or uint32 (TYPE U)
+        bits = (
+            bits.astype(np.float32).view(np.uint32)
+            if bits.dtype.kind == "f"
+            else bits.astype(np.uint32)
+        )
+        rgb = np.stack([(bits >> s) & 0xFF for s in (16, 8, 0)], axis=1)
+        raw["colors"] = (rgb / 255.0).astype(np.float32)
+    return raw
+
+
+# ---------------------------------------------------------------- writers
+
+
+def vertex_array(points, colors=None, labels=None, branch_ids=None) -> np.ndarray:
+    """A structured (N,) array: x, y, z f8; red, green, blue u1; label u1; branch_id i4 (when given)."""
+    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
+    fields += [(c, "u1") for c in ("red", "green", "blue")] if colors is not None else []
+    fields += [("label", "u1")] if labels is not None else []
+    fields += [("branch_id", "<i4")] if branch_ids is not None else []
+    out = np.zeros(len(points), dtype=fields)
+    for k, name in enumerate("xyz"):
+        out[name] = points[:, k]
+    if colors is not None:
+        rgb = np.round(np.asarray(colors, np.float64) * 255).astype(np.uint8)
+        for k, name in enumerate(("red", "green", "blue")):
+            out[name] = rgb[:, k]
+    if labels is not None:
+        out["label"] = labels
+    if branch_ids is not None:
+        out["branch_id"] = branch_ids
+    return out
+
+
+def write_ply(f: BinaryIO, table: np.ndarray) -> None:
+    from plyfile import PlyData, PlyElement
+
+    PlyData([PlyElement.describe(table, "vertex")], text=False, byte_order="<").write(f)
+
+
+def write_npy(f: BinaryIO, table: np.ndarray) -> None:
+    """Plain (N, 3) float64 for bare points; the structured array when there are attributes."""
+    if len(table.dtype.names or ()) == 3:
+        np.save(f, np.stack([table[n] for n in "xyz"], axis=1))
+    else:
+        np.save(f, table)
+
+
+def write_text(f: BinaryIO, table: np.ndarray) -> None:
+    """``x y z [red green blue] [label] [branch_id]``; a ``//`` header line when there are attributes."""
+    names = list(table.dtype.names or ())
+    if len(names) > 3:
+        f.write(("//" + " ".join(names) + "\n").encode())
+    fmt = ["%.6f"] * 3 + ["%d"] * (len(names) - 3)
+    cols = np.column_stack([table[n].astype(np.float64) for n in names])
+    np.savetxt(f, cols, fmt=fmt, delimiter=" ")
