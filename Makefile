@@ -33,7 +33,15 @@ $(VENV)/.installed: pyproject.toml $(VENV)/.apt
 	$(BIN)/python -m pip install -q -e ".[$(EXTRAS)]"
 	@touch $@
 
-install: $(VENV)/.installed
+# The Khronos glTF validator (npm), used by the export tests. Node from Debian when missing.
+VALIDATOR := tools/gltf-validator
+$(VALIDATOR)/node_modules/.installed: $(VALIDATOR)/package-lock.json $(VENV)/.apt
+	@command -v npm >/dev/null || { echo "apt: installing nodejs npm"; apt-get update -qq && \
+	  DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends nodejs npm; }
+	npm ci --silent --no-audit --no-fund --prefix $(VALIDATOR)
+	@touch $@
+
+install: $(VENV)/.installed $(VALIDATOR)/node_modules/.installed
 
 demo: install
 	$(BIN)/arboretum demo --out out

@@ -1,0 +1,76 @@
+"""Levels of detail: fewer tube sides, coarser chains, and leaf cards merged into cluster cards."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from arboretum_server.grow.skeleton import Leaves
+
+from .chains import Chains
+
+
+@dataclass(frozen=True)
+class LodOptions:
+    """Resolution of one level of detail."""
+
+    sides: int = 8
+    """Tube sides around a branch at LOD 0; halved per level, at least 3."""
+    level: int = 0
+    """0 = full detail; each level halves the sides and doubles the leaf cluster cell."""
+
+    @property
+    def tube_sides(self) -> int:
+        return max(3, self.sides >> self.level)
+
+    @property
+    def chain_stride(self) -> int:
+        """Keep every n-th inner chain vertex (1 at LOD 0 and 1, then 2, 4, ...)."""
+        return 1 << max(self.level - 1, 0)
+
+
+def thin_chains(chains: Chains, stride: int) -> Chains:
+    """Drop inner chain vertices so every ``stride``-th one remains (ends always kept)."""
+    if stride <= 1:
+        return chains
+    pos = np.arange(len(chains.nodes)) - chains.starts[chains.chain]
+    last = chains.starts[chains.chain + 1] - 1
+    keep = (pos % stride == 0) | (np.arange(len(chains.nodes)) == last)
+    counts = np.bincount(chains.chain[keep], minlength=len(chains.starts) - 1)
+    return Chains(chains.nodes[keep], np.r_[0, np.cumsum(counts)].astype(np.int64),
+                  chains.chain[keep], chains.radius_node[keep])
+
+
+def cluster_leaves(leaves: Leaves, cell: float) -> Leaves:
+    """Merge the cards of each lobe inside one cubic cell of side ``cell`` into one card.
+
+    The cluster card sits at the mean centre, faces the mean normal, and is sqrt(count) times the
+    mean size, so the covered area stays about the same.
+    """
+    k = len(leaves.sizes)
+    if k == 0 or cell <= 0:
+        return leaves
+    ijk = np.floor(leaves.centres / cell).astype(np.int64)
+    key = np.c_[leaves.lobe, ijk]
+    _, group, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    group = group.ravel()
+    g = len(counts)
+
+    def mean(a: np.ndarray) -> np.ndarray:
+        sums = [np.bincount(group, a[:, i], minlength=g) for i in range(a.shape[1])]
+        return np.stack(sums, 1) / counts[:, None]
+
+    normal = _unit(mean(leaves.normals))
+    normal = np.where(np.linalg.norm(normal, axis=1, keepdims=True) > 0.5, normal, [0.0, 0.0, 1.0])
+    axis = mean(leaves.axes)
+    axis = axis - (axis * normal).sum(1, keepdims=True) * normal
+    fallback = np.cross(normal, np.where(np.abs(normal[:, 2:3]) < 0.9, [0, 0, 1.0], [1.0, 0, 0]))
+    axis = _unit(np.where(np.linalg.norm(axis, axis=1, keepdims=True) > 1e-6, axis, fallback))
+    size = mean(leaves.sizes[:, None])[:, 0] * np.sqrt(counts)
+    lobe = np.bincount(group, leaves.lobe, minlength=g) / counts
+    return Leaves(mean(leaves.centres), normal, axis, size, np.rint(lobe).astype(np.int64))
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-12)

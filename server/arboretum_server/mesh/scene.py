@@ -1,0 +1,60 @@
+"""A grown tree as export-ready parts: bark tubes and leaf cards with their textured materials."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from arboretum_library.assets import asset_path
+from arboretum_library.export.parts import Material, MeshPart
+from arboretum_server.grow.skeleton import GrownTree
+
+from .cards import card_mesh
+from .chains import split_chains
+from .lod import LodOptions, cluster_leaves, thin_chains
+from .tubes import Tubes, sweep
+
+BARK, LEAF = 0, 1
+"""Material indices of ``tree_materials``."""
+
+
+@dataclass(frozen=True, eq=False)
+class TreeMesh:
+    """The meshes of one tree at one level of detail."""
+
+    bark: MeshPart
+    leaves: MeshPart
+    tubes: Tubes
+    """The bark tubes with their per-face chain (for per-branch checks)."""
+
+    @property
+    def parts(self) -> list[MeshPart]:
+        return [self.bark, self.leaves]
+
+    @property
+    def triangles(self) -> int:
+        return int(len(self.bark.faces) + len(self.leaves.faces))
+
+
+def tree_materials(textures: bool = True) -> list[Material]:
+    """Bark (opaque, tiled texture) and leaves (alpha-masked, double-sided) from ``assets/textures``."""
+    bark = asset_path("textures", "bark.png").read_bytes() if textures else None
+    leaf = asset_path("textures", "leaf.png").read_bytes() if textures else None
+    return [
+        Material("bark", (1.0, 1.0, 1.0, 1.0) if textures else (0.35, 0.25, 0.17, 1.0), bark, "bark.png"),
+        Material("leaf", (1.0, 1.0, 1.0, 1.0) if textures else (0.2, 0.5, 0.15, 1.0), leaf, "leaf.png",
+                 alpha_cutoff=0.5 if textures else None, double_sided=True, roughness=0.7),
+    ]
+
+
+def tree_mesh(tree: GrownTree, lod: LodOptions = LodOptions()) -> TreeMesh:
+    """Tubes around every chain of ``tree`` and its leaf cards, at ``lod``."""
+    chains = thin_chains(split_chains(tree.parents, tree.radii), lod.chain_stride)
+    tubes = sweep(tree.positions, tree.radii, chains, lod.tube_sides)
+    bark = MeshPart("bark", tubes.positions, tubes.faces, tubes.normals, tubes.uv, BARK)
+    leaves = tree.leaves
+    if lod.level > 0 and len(leaves.sizes):
+        leaves = cluster_leaves(leaves, float(np.median(leaves.sizes)) * (1 << lod.level))
+    cards = card_mesh(leaves.centres, leaves.normals, leaves.axes, leaves.sizes, "leaves", LEAF)
+    return TreeMesh(bark, cards, tubes)
