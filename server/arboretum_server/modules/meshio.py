@@ -1,0 +1,50 @@
+"""Read module meshes (OBJ, GLB/glTF) into Z-up float64 arrays; write OBJ atomically."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from arboretum_library.errors import InputError
+from arboretum_library.geometry import yup_to_zup
+
+
+def load_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 3) float64 Z up and faces (F, 3) int32 of the mesh in ``path`` (.obj, .glb, .gltf).
+
+    OBJ is taken as Z up (as we write it); glTF is Y up and converted. Coincident vertices are merged.
+    """
+    import trimesh
+
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".obj", ".glb", ".gltf"):
+        raise InputError(
+            f"module mesh {path}: unsupported format {suffix!r} (use .obj, .glb or .gltf)"
+        )
+    if not path.is_file():
+        raise InputError(f"module mesh {path}: file not found")
+    try:
+        mesh = trimesh.load(path, force="mesh", process=True)
+    except Exception as exc:  # trimesh raises many types on malformed files
+        raise InputError(f"module mesh {path}: cannot be read ({exc})") from exc
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    faces = np.asarray(mesh.faces, dtype=np.int32)
+    if len(faces) == 0:
+        raise InputError(f"module mesh {path}: has no triangles")
+    if suffix != ".obj":
+        vertices = yup_to_zup(vertices)
+    return vertices, faces
+
+
+def save_obj(path: str | Path, vertices: np.ndarray, faces: np.ndarray, comment: str = "") -> None:
+    """Write a triangle mesh (V, 3) / (F, 3) as OBJ (Z up, metres) via a temporary file."""
+    path = Path(path)
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    lines = [f"# {line}" for line in comment.splitlines()]
+    lines += [f"v {x:.5f} {y:.5f} {z:.5f}" for x, y, z in np.asarray(vertices, dtype=np.float64)]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in np.asarray(faces, dtype=np.int64)]
+    tmp.write_text("\n".join(lines) + "\n")
+    os.replace(tmp, path)

@@ -1,0 +1,117 @@
+"""Module sets: branch and trunk meshes with their skeletons, normalised base at origin pointing +Z."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from arboretum_library.errors import InputError
+
+from .skeleton import ModuleSkeleton, extract_skeleton
+
+
+@dataclass(frozen=True)
+class Module:
+    name: str
+    """File stem, e.g. 'branch_03_fork'; names starting with 'trunk' are trunks."""
+    vertices: np.ndarray
+    """(V, 3) float64 module frame: base at the origin, base direction +Z, metres."""
+    faces: np.ndarray
+    """(F, 3) int32 triangles."""
+    skeleton: ModuleSkeleton
+    """Skeleton curves in the module frame."""
+
+    @property
+    def is_trunk(self) -> bool:
+        return self.name.startswith("trunk")
+
+    @property
+    def size(self) -> float:
+        """size(M) of Eq. 1: largest distance from the base to a skeleton point (metres, scale 1)."""
+        return float(np.linalg.norm(self.skeleton.points, axis=1).max())
+
+
+@dataclass(frozen=True)
+class ModuleSet:
+    modules: tuple[Module, ...]
+    """All modules; indices into this tuple identify module types in a grown tree."""
+
+    @property
+    def branch_indices(self) -> np.ndarray:
+        return np.array([i for i, m in enumerate(self.modules) if not m.is_trunk], dtype=np.int64)
+
+    @property
+    def trunk_indices(self) -> np.ndarray:
+        return np.array([i for i, m in enumerate(self.modules) if m.is_trunk], dtype=np.int64)
+
+    def subset(self, names: list[str]) -> ModuleSet:
+        """The modules named in ``names`` (in that order)."""
+        by_name = {m.name: m for m in self.modules}
+        missing = [n for n in names if n not in by_name]
+        if missing:
+            raise InputError(f"module set: no module named {missing[0]!r}")
+        return ModuleSet(tuple(by_name[n] for n in names))
+
+
+def rotation_to(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """3x3 rotation taking unit vector ``a`` (3,) to unit vector ``b`` (3,) by the shortest arc."""
+    v, c = np.cross(a, b), float(np.dot(a, b))
+    if c < -1 + 1e-12:
+        axis = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+        axis /= np.linalg.norm(axis)
+        return 2 * np.outer(axis, axis) - np.eye(3)
+    k = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + k + k @ k / (1 + c)
+
+
+def make_module(name: str, vertices: np.ndarray, faces: np.ndarray) -> Module:
+    """Extract the skeleton of a mesh (base on its lowest plane) and normalise base -> origin, +Z."""
+    sk = extract_skeleton(vertices, faces)
+    R = rotation_to(sk.base_direction, np.array([0.0, 0.0, 1.0]))
+    base = sk.base.copy()
+
+    def move(p: np.ndarray) -> np.ndarray:
+        return (np.asarray(p) - base) @ R.T
+
+    sk = replace(
+        sk,
+        points=move(sk.points),
+        tangent=sk.tangent @ R.T,
+        base=np.zeros(3),
+        base_direction=np.array([0.0, 0.0, 1.0]),
+    )
+    return Module(name, move(vertices), np.asarray(faces, dtype=np.int32), sk)
+
+
+def load_module_set(folder: str | Path) -> ModuleSet:
+    """All ``*.obj``, ``*.glb`` and ``*.gltf`` files of ``folder`` as a module set (sorted by name)."""
+    from .meshio import load_mesh
+
+    folder = Path(folder)
+    files = sorted(p for p in folder.glob("*") if p.suffix.lower() in (".obj", ".glb", ".gltf"))
+    if not files:
+        raise InputError(f"module folder {folder}: no .obj/.glb/.gltf files")
+    modules = tuple(make_module(p.stem, *load_mesh(p)) for p in files)
+    if not any(not m.is_trunk for m in modules):
+        raise InputError(f"module folder {folder}: no branch modules (only trunk_* files)")
+    return ModuleSet(modules)
+
+
+def save_module_set(modules: ModuleSet, folder: str | Path, note: str = "") -> list[Path]:
+    """Write every module as ``folder/NAME.obj`` (Z up, metres); returns the paths."""
+    from .meshio import save_obj
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    out = []
+    for m in modules.modules:
+        save_obj(
+            folder / f"{m.name}.obj",
+            m.vertices,
+            m.faces,
+            comment=f"Arboretum module {m.name}\n{note}",
+        )
+        out.append(folder / f"{m.name}.obj")
+    return out
