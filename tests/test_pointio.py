@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from plyfile import PlyData, PlyElement
 
-from arboretum_library import pointio, pointio_formats
+from arboretum_library import pointio, pointio_pcd
 from arboretum_library.assets import assets_dir
 from arboretum_library.errors import InputError, ValidationError
 from arboretum_library.geometry import yup_to_zup, zup_to_yup
@@ -268,7 +268,7 @@ def test_pcd_ascii_and_compressed(tmp_path, tree, attrs):
 
 
 def test_lzf_decompress_reference_vectors():
-    lzf = pointio_formats.lzf_decompress
+    lzf = pointio_pcd.lzf_decompress
     assert lzf(b"\x02abc", 3) == b"abc"
     assert lzf(b"\x02abc\x80\x02", 9) == b"abcabcabc"  # back reference overlapping its own output
     assert lzf(b"\x05abcdef\x20\x05", 9) == b"abcdefabc"  # plain back reference of 3 bytes
