@@ -13,7 +13,7 @@ Leaf cards: leaf ``j`` is a flat card centred on ``leaf_positions[j]``. Its unit
 +Y across it, card +Z is the blade normal. The card spans ``leaf_sizes[j]`` along X and
 ``leaf_sizes[j] * LEAF_WIDTH_RATIO`` along Y; the blade is the ellipse inscribed in the card.
 
-Files: ``save_truth`` writes an uncompressed .npz (``allow_pickle=False``) holding the arrays of
+Files: ``save_truth`` writes a compressed .npz (``allow_pickle=False``) holding the arrays of
 ``codec.flatten`` plus a ``meta.json`` entry (UTF-8 JSON bytes as uint8) with the format tag and the
 scalar fields; the write goes to a temporary file first and is then renamed, so Ctrl-C never leaves a
 broken file.
@@ -89,7 +89,9 @@ class TreeTruth:
             raise ValidationError(f"TreeTruth.positions: a skeleton needs >= 2 nodes, got {n}")
         rad = _frozen_array(self, "radii", self.radii, np.float64, (n,))
         if (rad <= 0).any():
-            raise ValidationError(f"TreeTruth.radii: {int((rad <= 0).sum())} radius(es) are not > 0")
+            raise ValidationError(
+                f"TreeTruth.radii: {int((rad <= 0).sum())} radius(es) are not > 0"
+            )
         parent = _frozen_array(self, "parent", self.parent, np.int32, (n,))
         _check_topology(parent)
         bid = _frozen_array(self, "branch_id", self.branch_id, np.int32, (n,))
@@ -108,10 +110,14 @@ class TreeTruth:
         m = len(lp)
         q = _frozen_array(self, "leaf_wxyz", self.leaf_wxyz, np.float64, (m, 4))
         if m and np.abs(np.linalg.norm(q, axis=1) - 1.0).max() > 1e-6:
-            raise ValidationError("TreeTruth.leaf_wxyz: quaternions must have unit length (within 1e-6)")
+            raise ValidationError(
+                "TreeTruth.leaf_wxyz: quaternions must have unit length (within 1e-6)"
+            )
         sizes = _frozen_array(self, "leaf_sizes", self.leaf_sizes, np.float64, (m,))
         if (sizes <= 0).any():
-            raise ValidationError(f"TreeTruth.leaf_sizes: {int((sizes <= 0).sum())} size(s) are not > 0")
+            raise ValidationError(
+                f"TreeTruth.leaf_sizes: {int((sizes <= 0).sum())} size(s) are not > 0"
+            )
         node = np.asarray(self.leaf_node, dtype=np.int32).reshape(-1)
         if m and node.size == 0:
             node = _nearest_nodes(lp, self.positions)
@@ -136,7 +142,9 @@ def _check_topology(parent: np.ndarray) -> None:
     idx = np.arange(len(parent))
     roots = np.flatnonzero(parent < 0)
     if roots.tolist() != [0] or parent[0] != -1:
-        raise ValidationError(f"TreeTruth.parent: need exactly one root (-1) at node 0, got roots {roots[:5].tolist()}")
+        raise ValidationError(
+            f"TreeTruth.parent: need exactly one root (-1) at node 0, got roots {roots[:5].tolist()}"
+        )
     bad = np.flatnonzero(parent[1:] >= idx[1:]) + 1
     if bad.size:
         raise ValidationError(
@@ -153,15 +161,21 @@ def _check_branches(parent: np.ndarray, bid: np.ndarray, order: np.ndarray) -> N
     used = np.bincount(bid, minlength=len(starts)) > 0
     if (starts[used] != 1).any():
         b = int(np.flatnonzero(used & (starts != 1))[0])
-        raise ValidationError(f"TreeTruth.branch_id: branch {b} must be one chain with one first node")
+        raise ValidationError(
+            f"TreeTruth.branch_id: branch {b} must be one chain with one first node"
+        )
     cont = np.flatnonzero(~first)
     if (np.bincount(parent[cont], minlength=len(parent)) > 1).any():
-        raise ValidationError("TreeTruth.branch_id: a node continues into two children of its own branch")
+        raise ValidationError(
+            "TreeTruth.branch_id: a node continues into two children of its own branch"
+        )
     if (order[cont] != order[parent[cont]]).any():
         raise ValidationError("TreeTruth.branch_order: must be constant along a branch")
     kids = np.flatnonzero(first & (parent >= 0))
     if (order[kids] < order[parent[kids]]).any():
-        raise ValidationError("TreeTruth.branch_order: a branch cannot have a lower order than its parent")
+        raise ValidationError(
+            "TreeTruth.branch_order: a branch cannot have a lower order than its parent"
+        )
 
 
 def _nearest_nodes(q: np.ndarray, positions: np.ndarray, chunk: int = 2048) -> np.ndarray:
@@ -208,7 +222,11 @@ def branch_polylines(truth: TreeTruth) -> list[np.ndarray]:
     out = []
     for chain in chains:
         head = int(parent[chain[0]])
-        out.append(np.concatenate([[head], chain]).astype(np.int32) if head >= 0 else chain.astype(np.int32))
+        out.append(
+            np.concatenate([[head], chain]).astype(np.int32)
+            if head >= 0
+            else chain.astype(np.int32)
+        )
     return out
 
 
@@ -231,7 +249,7 @@ def leaf_card_corners(truth: TreeTruth) -> np.ndarray:
 
 
 def save_truth(path: str | os.PathLike, truth: TreeTruth) -> Path:
-    """Write ``truth`` to ``path`` (.npz) atomically (temporary file, then rename). Returns the path."""
+    """Write ``truth`` to ``path`` (compressed .npz) atomically (temporary file, then rename). Returns the path."""
     path = Path(path)
     meta, arrays = flatten(truth)
     doc = {"format": FORMAT, "version": VERSION, "record": meta}
@@ -240,7 +258,8 @@ def save_truth(path: str | os.PathLike, truth: TreeTruth) -> Path:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, **{k: np.ascontiguousarray(a) for k, a in arrays.items()})
+            np.savez_compressed(fh, **{k: np.ascontiguousarray(a) for k, a in arrays.items()})
+        os.chmod(tmp, 0o644)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
