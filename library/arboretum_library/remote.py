@@ -1,0 +1,206 @@
+"""The synchronous Python client of an Arboretum server (used by the GUI, scripts and tests).
+
+    with Remote("tcp://127.0.0.1:5555") as r:
+        sid = r.new_session("my tree").session
+        r.add_example(sid, "scan-0001", np.eye(4))
+        glb = r.export_mesh(sid, progress=print).data.tobytes()
+
+One DEALER socket, used from one thread. Every call has a timeout; on a timeout the socket is closed
+(linger 0) and a new one connects (the "lazy pirate" pattern), and the request is sent again with the
+same id: the server answers a retried request from its reply cache, so an edit is never applied
+twice. LONG requests stream ``Progress`` events; each event restarts the timeout, and a progress
+callback that returns False cancels the job. Failures raise ``RemoteError`` with the server's code.
+"""
+
+from __future__ import annotations
+
+import os
+import secrets
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, TypeVar
+
+import numpy as np
+import zmq
+
+from . import protocol as P
+from .errors import ArboretumError, ProtocolError
+
+R = TypeVar("R", bound=P.Reply)
+ProgressCallback = Callable[[float, float, str], Any]
+
+
+class RemoteError(ArboretumError):
+    """The server answered with an error, or did not answer in time (code 'timeout')."""
+
+    def __init__(self, code: str, message: str) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+class Remote:
+    """A connection to an Arboretum server."""
+
+    def __init__(self, endpoint: str = "tcp://127.0.0.1:5555", *, timeout: float = 10.0, retries: int = 2,
+                 curve: str | os.PathLike | None = None, handshake: bool = True,
+                 zctx: zmq.Context | None = None) -> None:
+        self.endpoint = endpoint
+        self.timeout = timeout
+        self.retries = retries
+        self._curve = _client_keys(Path(curve)) if curve is not None else None
+        self._zctx = zctx or zmq.Context.instance()
+        self._next_id = secrets.randbits(40) << 20
+        self._sock: zmq.Socket | None = None
+        self.welcome: P.Welcome | None = None
+        if handshake:
+            self.welcome = self.call(P.Hello())
+
+    # -- plumbing ------------------------------------------------------------------------------
+    def _socket(self) -> zmq.Socket:
+        s = self._sock
+        if s is None:
+            s = self._zctx.socket(zmq.DEALER)
+            s.setsockopt(zmq.LINGER, 0)
+            if self._curve is not None:
+                s.curve_serverkey, s.curve_publickey, s.curve_secretkey = self._curve
+            s.connect(self.endpoint)
+            self._sock = s
+        return s if self._sock is None else self._sock
+
+    def _reset(self) -> None:
+        if self._sock is not None:
+            self._sock.close(0)
+            self._sock = None
+
+    def close(self) -> None:
+        self._reset()
+
+    def __enter__(self) -> Remote:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def call(self, req: P.Request, *, timeout: float | None = None, retries: int | None = None,
+             progress: ProgressCallback | None = None) -> Any:
+        """Send ``req`` and return its reply (of type ``req.REPLY``); ``RemoteError`` on an error reply."""
+        self._next_id += 1
+        rid = self._next_id
+        frames = P.to_frames(req, rid)
+        wait = self.timeout if timeout is None else timeout
+        for _ in range((self.retries if retries is None else retries) + 1):
+            self._socket().send_multipart(frames, copy=False)
+            reply = self._await(rid, wait, progress)
+            if reply is not None:
+                if isinstance(reply, P.Error):
+                    raise RemoteError(reply.code, reply.message)
+                if not isinstance(reply, req.REPLY):
+                    raise RemoteError("protocol", f"{req.TYPE}: expected {req.REPLY.TYPE}, got {reply.TYPE}")
+                return reply
+            self._reset()  # lazy pirate: a fresh socket, then the same request again
+        raise RemoteError("timeout", f"{req.TYPE}: no answer from {self.endpoint} within {wait:g} s")
+
+    def _await(self, rid: int, wait: float, progress: ProgressCallback | None) -> P.Msg | None:
+        sock = self._socket()
+        deadline = time.monotonic() + wait
+        while (left := deadline - time.monotonic()) > 0:
+            if not sock.poll(int(left * 1000) + 1, zmq.POLLIN):
+                continue
+            frames = sock.recv_multipart(copy=False)
+            try:
+                got, msg = P.parse([f.buffer for f in frames])
+            except ProtocolError as exc:
+                raise RemoteError(getattr(exc, "code", "protocol"), f"unreadable reply: {exc}") from None
+            if got != rid:
+                continue  # a late answer to an earlier, abandoned request
+            if isinstance(msg, P.Progress):
+                deadline = time.monotonic() + wait
+                if progress is not None and progress(msg.done, msg.total, msg.message) is False:
+                    sock.send_multipart(P.to_frames(P.Cancel(request=rid), rid + (1 << 62)))
+                continue
+            return msg
+        return None
+
+    # -- operations ----------------------------------------------------------------------------
+    def ping(self) -> float:
+        """Round-trip time in seconds."""
+        t = time.perf_counter()
+        self.call(P.Ping())
+        return time.perf_counter() - t
+
+    def library_list(self, species: str = "", tags: Sequence[str] = ()) -> list[dict]:
+        return list(self.call(P.LibraryList(species=species, tags=tuple(tags))).entries)
+
+    def search(self, query: str, limit: int = 50) -> list[dict]:
+        return list(self.call(P.LibrarySearch(query=query, limit=limit)).hits)
+
+    def get_example(self, example_id: str):
+        return self.call(P.LibraryGet(id=example_id)).example
+
+    def delete_example_from_library(self, example_id: str) -> None:
+        self.call(P.LibraryDelete(id=example_id))
+
+    def import_scan(self, points: np.ndarray, *, labels: np.ndarray | None = None, name: str = "scan",
+                    species: str = "unknown", options: dict | None = None,
+                    progress: ProgressCallback | None = None, timeout: float = 120.0) -> P.LibraryImported:
+        req = P.LibraryImport(points=points, labels=labels, name=name, species=species, options=options or {})
+        return self.call(req, progress=progress, timeout=timeout)
+
+    def new_session(self, name: str = "") -> P.SessionInfo:
+        return self.call(P.SessionNew(name=name))
+
+    def assembly(self, session: str) -> P.SessionAssembly:
+        return self.call(P.SessionGet(session=session))
+
+    def add_example(self, session: str, example_id: str, T_world_example: np.ndarray | None = None,
+                    scale: float = 1.0, instance: str = "") -> P.Edit:
+        T = np.eye(4) if T_world_example is None else T_world_example
+        return self.call(P.AddExample(session=session, example_id=example_id, T_world_example=T, scale=scale,
+                                      instance=instance))
+
+    def transform_example(self, session: str, instance: str, T_world_example: np.ndarray, scale: float = 1.0) -> P.Edit:
+        return self.call(P.TransformExample(session=session, instance=instance, T_world_example=T_world_example,
+                                            scale=scale))
+
+    def transform_lobe(self, session: str, instance: str, lobe: int, T_example_lobe: np.ndarray) -> P.Edit:
+        return self.call(P.TransformLobe(session=session, instance=instance, lobe=lobe, T_example_lobe=T_example_lobe))
+
+    def delete_placement(self, session: str, instance: str) -> P.Edit:
+        return self.call(P.DeleteExample(session=session, instance=instance))
+
+    def sketch(self, session: str, strokes: Sequence[np.ndarray], instance: str = "") -> P.Edit:
+        pts, sizes = P.pack_strokes(strokes)
+        return self.call(P.SketchExample(session=session, stroke_points=pts, stroke_sizes=sizes, instance=instance))
+
+    def undo(self, session: str) -> P.Edit:
+        return self.call(P.Undo(session=session))
+
+    def redo(self, session: str) -> P.Edit:
+        return self.call(P.Redo(session=session))
+
+    def grow(self, session: str, seed: int = 0, options: dict | None = None,
+             progress: ProgressCallback | None = None, timeout: float = 120.0) -> P.GrownTree:
+        return self.call(P.Grow(session=session, seed=seed, options=options or {}), progress=progress, timeout=timeout)
+
+    def export_mesh(self, session: str, format: str = "glb", seed: int = 0, lod: int = 0,
+                    options: dict | None = None, progress: ProgressCallback | None = None,
+                    timeout: float = 120.0) -> P.ExportFile:
+        req = P.ExportMesh(session=session, format=format, seed=seed, lod=lod, options=options or {})
+        return self.call(req, progress=progress, timeout=timeout)
+
+
+def _client_keys(folder: Path) -> tuple[bytes, bytes, bytes]:
+    """(server public, client public, client secret) from a folder made by ``arboretum keys generate``."""
+    import zmq.auth
+
+    from .errors import InputError
+
+    secrets_ = sorted(p for p in folder.glob("*.key_secret") if p.name != "server.key_secret")
+    if not (folder / "server.key").is_file() or not secrets_:
+        raise InputError(f"{folder}: needs server.key and a client *.key_secret (arboretum keys generate)")
+    server_pub, _ = zmq.auth.load_certificate(folder / "server.key")
+    pub, sec = zmq.auth.load_certificate(secrets_[0])
+    if sec is None:
+        raise InputError(f"{secrets_[0]}: holds no secret key")
+    return server_pub, pub, sec

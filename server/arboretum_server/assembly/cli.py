@@ -1,0 +1,91 @@
+"""``arboretum assemble SCRIPT --library LIB --out SESSION``: headless assembly from a script.
+
+The script (JSON or YAML) is a list of operations, or a map with ``ops:`` (and optionally ``name:``).
+Each operation is a one-key map, run by the same handlers as the server, in-process::
+
+    - add: {example: ex-0001, as: trunk, at: [0, 0, 0], rotate_z: 30, scale: 1.0}
+    - transform: {instance: trunk, at: [0.1, 0, 0], rotate: [0, 0, 1, 45]}
+    - transform_lobe: {instance: trunk, lobe: 2, at: [0, 0.1, 0], scale: 1.3}
+    - sketch: {as: top, strokes: [[[0, 0, 2], [0, 0, 3]], [[0.2, 0, 3], [0, 0.2, 3], [-0.2, 0, 3], [0.2, 0, 3]]]}
+    - delete: {instance: top}
+    - undo: {}
+    - redo: {}
+    - export: {out: tree.glb, seed: 0, lod: 0, options: {density: 0.5}}
+
+A transform is ``T`` (a 4x4 matrix) or ``at`` (translation, metres), ``rotate`` ([axis x, y, z, degrees])
+or ``rotate_z`` (degrees) and ``scale``. ``--out`` writes the session (an Assembly record, .npz).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from arboretum_library.cli import add_json_flag, emit
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("assemble", help="build an assembly headlessly from a JSON/YAML script")
+    p.add_argument("script", help="JSON or YAML list of operations (see docs/server.md)")
+    p.add_argument("--library", required=True, metavar="LIB", help="example library")
+    p.add_argument("--out", required=True, metavar="SESSION", help="session file to write (.npz)")
+    p.add_argument("--from", dest="start", default=None, metavar="SESSION", help="start from a saved session")
+    add_json_flag(p)
+    p.set_defaults(func=run)
+
+
+def read_script(path: str | Path) -> tuple[str, list[dict]]:
+    """(session name, operations) of a JSON or YAML script; ``InputError`` describing any problem."""
+    import json
+
+    import yaml
+
+    from arboretum_library.errors import InputError
+
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: no such script")
+    text = p.read_text()
+    try:
+        data = json.loads(text) if p.suffix.lower() == ".json" else yaml.safe_load(text)
+    except (json.JSONDecodeError, yaml.YAMLError) as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else str(exc).splitlines()[0]
+        raise InputError(f"{p}: not valid {'JSON' if p.suffix.lower() == '.json' else 'YAML'} ({where})") from None
+    name, ops = "", data
+    if isinstance(data, dict):
+        name, ops = str(data.get("name", "")), data.get("ops")
+    if not isinstance(ops, list) or not all(isinstance(o, dict) and len(o) == 1 for o in ops):
+        raise InputError(f"{p}: expected a list of one-key maps such as '- add: {{example: ID}}'")
+    return name, ops
+
+
+def run(args: argparse.Namespace) -> int:
+    import tempfile
+
+    from arboretum_library.codec import load_record, save_record
+    from arboretum_library.model import Assembly
+    from arboretum_library.progress import StatusLine
+
+    from .script import Runner
+
+    name, ops = read_script(args.script)
+    start = load_record(args.start, Assembly) if args.start else None
+    with tempfile.TemporaryDirectory(prefix="arboretum-assemble-") as state:
+        runner = Runner(Path(args.library), Path(state), name, start)
+        try:
+            results = [runner.run(i, op, None if args.json else StatusLine()) for i, op in enumerate(ops)]
+            assembly = runner.assembly()
+        finally:
+            runner.close()
+    save_record(args.out, assembly)
+    data: dict[str, Any] = {
+        "out": args.out, "operations": results, "placements": [p.instance for p in assembly.placements],
+        "merges": [[m.a, m.b, m.vertex_a, m.vertex_b] for m in assembly.merges],
+        "sketches": [s.id for s in assembly.sketches],
+    }
+    text = "\n".join(r["label"] for r in results) + (
+        f"\nwrote {args.out}: {len(assembly.placements)} placements, {len(assembly.merges)} merges")
+    emit(args, data, text)
+    return 0

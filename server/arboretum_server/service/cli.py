@@ -1,0 +1,118 @@
+"""``arboretum serve``: the ZeroMQ server (see docs/server.md).
+
+    arboretum serve [--bind tcp://127.0.0.1:5555] [--library LIB] [--state DIR]
+                    [--curve KEYDIR | --insecure] [--workers 2] [--fsync]
+
+Loopback only unless CurveZMQ keys (``arboretum keys generate KEYDIR``) or an explicit ``--insecure``
+are given. Prints ``listening on ENDPOINT`` (``--bind tcp://127.0.0.1:0`` picks a free port).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+DEFAULT_BIND = "tcp://127.0.0.1:5555"
+LOOPBACK = ("tcp://127.0.0.1:", "tcp://localhost:", "tcp://[::1]:", "ipc://", "inproc://")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("serve", help="run the Arboretum server (ZeroMQ) for clients and scripts")
+    p.add_argument("--bind", default=DEFAULT_BIND, help=f"endpoint to bind (default {DEFAULT_BIND})")
+    p.add_argument("--library", default=None, metavar="LIB", help="example library (created if missing)")
+    p.add_argument("--state", default="arboretum-state", metavar="DIR", help="session autosaves (default ./arboretum-state)")
+    p.add_argument("--curve", default=None, metavar="KEYDIR", help="CurveZMQ keys from 'arboretum keys generate'")
+    p.add_argument("--insecure", action="store_true", help="allow a non-loopback bind without encryption")
+    p.add_argument("--workers", type=int, default=2, help="worker processes for long jobs (default 2)")
+    p.add_argument("--fsync", action="store_true", help="fsync every autosave (survives power loss, slower)")
+    p.add_argument("--verbose", action="store_true", help="log every malformed message")
+    p.set_defaults(func=run)
+
+
+def check_bind(bind: str, curve: str | None, insecure: bool) -> None:
+    """``InputError`` unless ``bind`` is loopback or the user chose Curve keys or --insecure."""
+    from arboretum_library.errors import InputError
+
+    if not bind.startswith(("tcp://", "ipc://", "inproc://")):
+        raise InputError(f"--bind {bind!r}: use tcp://HOST:PORT (or ipc://PATH)")
+    if not bind.startswith(LOOPBACK) and curve is None and not insecure:
+        raise InputError(f"--bind {bind}: binding beyond loopback needs --curve KEYDIR "
+                         "(make keys with 'arboretum keys generate KEYDIR') or an explicit --insecure")
+
+
+def curve_keys(folder: str):
+    """(server public, server secret) and the authenticator accepting ``folder/clients/*.key``."""
+    from pathlib import Path
+
+    import zmq
+    import zmq.auth
+    from zmq.auth.thread import ThreadAuthenticator
+
+    from arboretum_library.errors import InputError
+
+    root = Path(folder)
+    secret = root / "server.key_secret"
+    if not secret.is_file() or not (root / "clients").is_dir():
+        raise InputError(f"--curve {folder}: no server.key_secret and clients/ (run 'arboretum keys generate {folder}')")
+    pub, sec = zmq.auth.load_certificate(secret)
+    if sec is None:
+        raise InputError(f"{secret}: holds no secret key")
+    auth = ThreadAuthenticator(zmq.Context.instance())
+    auth.start()
+    auth.configure_curve(domain="*", location=str(root / "clients"))
+    return (pub, sec), auth
+
+
+def run(args: argparse.Namespace) -> int:
+    import logging
+    import signal
+    import sys
+    import threading
+    from pathlib import Path
+
+    from arboretum_library.errors import InputError
+
+    from .context import Context
+    from .dispatch import Dispatcher, warm_up
+    from .jobs import JobRunner
+    from .sessions import Sessions
+    from .socket import Server
+
+    check_bind(args.bind, args.curve, args.insecure)
+    if args.workers < 1:
+        raise InputError("--workers must be at least 1")
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, stream=sys.stderr,
+                        format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    keys, auth = curve_keys(args.curve) if args.curve else (None, None)
+    state = Path(args.state)
+    lock = _lock_state(state)
+    ctx = Context(Sessions(state, fsync=args.fsync), Path(args.library) if args.library else None)
+    server = Server(Dispatcher(ctx), args.bind, jobs=JobRunner(args.workers), curve_secret=keys)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: server.stop_event.set())
+    print(f"listening on {server.endpoint}", flush=True)
+    threading.Thread(target=warm_up, name="warm-up", daemon=True).start()  # imports while serving
+    try:
+        server.serve_forever()
+    finally:
+        ctx.sessions.snapshot_all()
+        ctx.close()
+        if auth is not None:
+            auth.stop()
+        lock.close()
+    return 0
+
+
+def _lock_state(state):
+    """Hold an exclusive lock on ``state/.lock`` so two servers never share one state folder."""
+    import fcntl
+
+    from arboretum_library.errors import InputError
+
+    state.mkdir(parents=True, exist_ok=True)
+    fh = open(state / ".lock", "a+b")
+    try:
+        fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        fh.close()
+        raise InputError(f"--state {state}: another server is using this folder") from None
+    return fh

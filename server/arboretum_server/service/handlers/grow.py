@@ -1,0 +1,54 @@
+"""Growth of the assembled tree (VRTree 3.5, Eq. 2) as a job: ``grow.tree.grow_tree`` in a worker."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from arboretum_library import protocol as P
+from arboretum_library.errors import InputError
+from arboretum_library.model import HBL
+from arboretum_server.assembly.world import assembly_to_hbl
+from arboretum_server.service.context import Context
+from arboretum_server.service.jobs import Job
+
+
+def grow_options(options: dict):
+    """``GrowOptions`` from a request's option map; ``InputError`` for unknown names."""
+    from arboretum_server.grow.options import GrowOptions
+
+    known = {f.name for f in dataclasses.fields(GrowOptions)}
+    bad = sorted(set(options) - known)
+    if bad:
+        raise InputError(f"unknown growth option(s): {', '.join(bad)}")
+    opts = dict(options)
+    if "lobe_density" in opts:
+        opts["lobe_density"] = {int(k): float(v) for k, v in dict(opts["lobe_density"]).items()}
+    try:
+        return GrowOptions(**opts)
+    except TypeError as exc:
+        raise InputError(f"growth options: {exc}") from None
+
+
+def grow_job(progress, hbl: HBL, seed: int, options: dict) -> dict:
+    """Worker: grow ``hbl``; the tree's arrays."""
+    from arboretum_server.grow.tree import grow_tree
+
+    t = grow_tree(hbl, grow_options(options), np.random.default_rng(seed), progress)
+    return {"positions": t.positions, "parents": t.parents, "radii": t.radii, "levels": t.levels,
+            "leaf_centres": t.leaves.centres, "leaf_normals": t.leaves.normals, "leaf_sizes": t.leaves.sizes}
+
+
+def session_hbl(ctx: Context, session_id: str) -> HBL:
+    """The assembled HBL of a session (checked now, grown in the worker)."""
+    return assembly_to_hbl(ctx.sessions.get(session_id).history.assembly, ctx.example)
+
+
+def grow(ctx: Context, req: P.Grow) -> Job:
+    grow_options(req.options)
+    kwargs = {"hbl": session_hbl(ctx, req.session), "seed": req.seed, "options": req.options}
+    return Job(f"{__name__}:grow_job", kwargs, lambda r: P.GrownTree(**r))
+
+
+HANDLERS = {P.Grow: grow}

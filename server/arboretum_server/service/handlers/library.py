@@ -1,0 +1,104 @@
+"""Library operations: list, search, get, delete, and import a scan by decomposing it (a job)."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+from arboretum_library import protocol as P
+from arboretum_server.service.context import Context
+from arboretum_server.service.jobs import Job
+
+
+def _entry(e) -> dict:
+    d = dataclasses.asdict(e)
+    d.update(d.pop("descriptors"))
+    d["tags"] = list(e.tags)
+    return d
+
+
+def list_examples(ctx: Context, req: P.LibraryList) -> P.LibraryEntries:
+    filters = {"species": req.species} if req.species else {}
+    rows = ctx.library().entries(tags=req.tags, **filters)
+    return P.LibraryEntries(entries=tuple(_entry(e) for e in rows))
+
+
+def search(ctx: Context, req: P.LibrarySearch) -> P.LibraryHits:
+    hits = ctx.library().search(req.query, limit=max(req.limit, 0) or None)
+    return P.LibraryHits(hits=tuple({"id": h.id, "score": h.score, "matched": list(h.matched)} for h in hits))
+
+
+def get(ctx: Context, req: P.LibraryGet) -> P.LibraryExample:
+    return P.LibraryExample(example=ctx.example(req.id))
+
+
+def delete(ctx: Context, req: P.LibraryDelete) -> P.Ack:
+    ctx.library().delete(req.id)
+    ctx.forget(req.id)
+    return P.Ack(detail=f"deleted {req.id}")
+
+
+def options_from(species: str, options: dict) -> Any:
+    """``DecomposeOptions`` from a request's species and option map; ``InputError`` for unknown names."""
+    from arboretum_library.errors import InputError
+    from arboretum_server.decompose.options import DecomposeOptions
+
+    known = {f.name for f in dataclasses.fields(DecomposeOptions)}
+    bad = sorted(set(options) - known)
+    if bad:
+        raise InputError(f"unknown decomposition option(s): {', '.join(bad)}")
+    opts = dict(options)
+    if "sc_bins" in opts:
+        opts["sc_bins"] = tuple(opts["sc_bins"])
+    try:
+        return DecomposeOptions(**{"species": species.lower(), **opts})
+    except TypeError as exc:
+        raise InputError(f"decomposition options: {exc}") from None
+
+
+def import_job(progress, library_path: str, points: np.ndarray, labels: np.ndarray | None, name: str,
+               species: str, options: dict) -> dict:
+    """Worker: decompose ``points`` and add one example per main branch to the library."""
+    from arboretum_library.model import Provenance
+    from arboretum_library.store import Library
+    from arboretum_server.decompose.examples import make_examples
+    from arboretum_server.decompose.pipeline import decompose
+
+    opts = options_from(species, options)
+    dec = decompose(points, opts, progress, labels=labels)
+    prov = Provenance(name, "", opts.species, opts.as_dict())
+    stem = "".join(c if c.isalnum() or c in "-_" else "-" for c in name)[:60] or "scan"
+    with Library.open(library_path, create=True) as lib:
+        examples = make_examples(dec.hbl, prov, lambda: lib.new_id(stem), lib.add)
+    return {"ids": [e.id for e in examples], "stats": dec.stats}
+
+
+def import_scan(ctx: Context, req: P.LibraryImport) -> Job:
+    ctx.library()  # fail now, not in the worker, when there is no library
+    options_from(req.species, req.options)
+    kwargs = {"library_path": str(ctx.library_path), "points": req.points, "labels": req.labels,
+              "name": req.name, "species": req.species, "options": req.options}
+
+    def finish(result: dict) -> P.LibraryImported:
+        return P.LibraryImported(ids=tuple(result["ids"]), stats=_jsonable(result["stats"]))
+
+    return Job(f"{__name__}:import_job", kwargs, finish)
+
+
+def _jsonable(d: dict) -> dict:
+    """The entries of ``d`` that are numbers or strings, as plain Python values."""
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, np.generic):
+            out[k] = v.item()
+        elif isinstance(v, str | int | float | bool):
+            out[k] = v
+    return out
+
+
+HANDLERS = {
+    P.LibraryList: list_examples, P.LibrarySearch: search, P.LibraryGet: get, P.LibraryDelete: delete,
+    P.LibraryImport: import_scan,
+}

@@ -1,0 +1,159 @@
+"""Refinement of a decomposed scan (VRTree 3.4, Fig. 5): open (a job), point cloud, remove / insert /
+merge / split lobe, undo, redo, commit to the library. The operations are ``decompose.refine``'s.
+
+Every edit is journaled (``refine_store``) before the reply; after a restart the first refinement
+request of a session rebuilds its draft in a worker (decompose again, replay the edits) and then runs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from arboretum_library import protocol as P
+from arboretum_library.errors import InputError
+from arboretum_server.service import refine_store
+from arboretum_server.service.context import Context
+from arboretum_server.service.handlers.library import options_from
+from arboretum_server.service.jobs import Job
+from arboretum_server.service.sessions import RefineDraft, Session
+
+EDITS = ("remove_lobe", "insert_lobe", "merge_lobes", "split_lobe")
+WARM = ("arboretum_server.decompose.refine", "sklearn.cluster", "arboretum_server.decompose.examples")
+
+
+def apply_edit(dec: Any, kind: str, args: dict) -> Any:
+    """The decomposition after refinement edit ``kind`` with ``args``."""
+    from arboretum_server.decompose import refine
+
+    if kind == "remove_lobe":
+        return refine.remove_lobe(dec, int(args["lobe"]))
+    if kind == "insert_lobe":
+        return refine.insert_lobe(dec, args["indices"])
+    if kind == "merge_lobes":
+        return refine.merge_lobes(dec, [int(j) for j in args["lobes"]])
+    strokes = P.unpack_strokes(args["stroke_points"], args["stroke_sizes"])
+    return refine.split_lobe(dec, int(args["lobe"]), strokes, int(args["seed"]))
+
+
+def decompose_job(progress, points: np.ndarray, labels: np.ndarray | None, species: str, options: dict,
+                  edits: tuple = ()) -> dict:
+    """Worker: decompose ``points`` and replay ``edits``; the draft's states, index and revision."""
+    from arboretum_server.decompose.pipeline import decompose
+
+    lab = labels if labels is not None and len(labels) else None
+    draft = RefineDraft([decompose(points, options_from(species, options), progress, labels=lab)])
+    for e in edits:
+        if e["kind"] in ("undo", "redo"):
+            draft.move(-1 if e["kind"] == "undo" else 1)
+        else:
+            draft.push(apply_edit(draft.current, e["kind"], e["args"]))
+    return {"states": draft.states, "index": draft.index, "revision": draft.revision}
+
+
+def _state(d: RefineDraft) -> P.RefineState:
+    return P.RefineState(hbl=d.current.hbl, revision=d.revision, can_undo=d.index > 0,
+                         can_redo=d.index < len(d.states) - 1)
+
+
+def _with_draft(ctx: Context, session_id: str, then: Callable[[Session, RefineDraft], P.Reply]) -> P.Reply | Job:
+    """``then(session, draft)``, first rebuilding a saved draft in a worker if the server restarted."""
+    s = ctx.sessions.get(session_id)
+    if s.refine is not None:
+        return then(s, s.refine)
+    saved = refine_store.load(ctx.sessions.dir(), s.id)
+    if saved is None:
+        raise InputError("this session has no scan to refine: send refine.open first")
+    src, edits = saved
+
+    def finish(r: dict) -> P.Reply:
+        if s.refine is not None:  # another request rebuilt it meanwhile: keep that one
+            return then(s, s.refine)
+        s.refine = RefineDraft(r["states"], r["index"], src.name, src.species, r["revision"], src.generation)
+        return then(s, s.refine)
+
+    kwargs = {"points": src.points, "labels": src.labels, "species": src.species, "options": src.options,
+              "edits": tuple(edits)}
+    return Job(f"{__name__}:decompose_job", kwargs, finish)
+
+
+def open_scan(ctx: Context, req: P.RefineOpen) -> Job:
+    s = ctx.sessions.get(req.session)
+    options_from(req.species, req.options)
+
+    def finish(r: dict) -> P.RefineState:
+        src = refine_store.start(ctx.sessions.dir(), s.id, req.points, req.labels, req.name, req.species, req.options)
+        s.refine = RefineDraft(r["states"], 0, req.name, req.species, 0, src.generation)
+        return _state(s.refine)
+
+    kwargs = {"points": req.points, "labels": req.labels, "species": req.species, "options": req.options}
+    return Job(f"{__name__}:decompose_job", kwargs, finish)
+
+
+def points(ctx: Context, req: P.RefinePoints) -> P.Reply | Job:
+    def then(s: Session, d: RefineDraft) -> P.RefineCloud:
+        dec = d.current
+        return P.RefineCloud(points=dec.hbl.points.astype(np.float32), labels=dec.labels, lobe_of=dec.lobe_of)
+
+    return _with_draft(ctx, req.session, then)
+
+
+def _edit(ctx: Context, session_id: str, kind: str, args: dict, arrays: dict | None = None) -> P.Reply | Job:
+    def then(s: Session, d: RefineDraft) -> P.RefineState:
+        if kind in ("undo", "redo"):
+            d.move(-1 if kind == "undo" else 1)
+        else:
+            d.push(apply_edit(d.current, kind, {**args, **(arrays or {})}))
+        refine_store.append(ctx.sessions.dir(), s.id, d.generation, kind, args, arrays, ctx.sessions.fsync)
+        return _state(d)
+
+    return _with_draft(ctx, session_id, then)
+
+
+def remove_lobe(ctx: Context, req: P.RemoveLobe):
+    return _edit(ctx, req.session, "remove_lobe", {"lobe": req.lobe})
+
+
+def insert_lobe(ctx: Context, req: P.InsertLobe):
+    return _edit(ctx, req.session, "insert_lobe", {}, {"indices": req.indices})
+
+
+def merge_lobes(ctx: Context, req: P.MergeLobes):
+    return _edit(ctx, req.session, "merge_lobes", {"lobes": list(req.lobes)})
+
+
+def split_lobe(ctx: Context, req: P.SplitLobe):
+    return _edit(ctx, req.session, "split_lobe", {"lobe": req.lobe, "seed": req.seed},
+                 {"stroke_points": req.stroke_points, "stroke_sizes": req.stroke_sizes})
+
+
+def undo(ctx: Context, req: P.RefineUndo):
+    return _edit(ctx, req.session, "undo", {})
+
+
+def redo(ctx: Context, req: P.RefineRedo):
+    return _edit(ctx, req.session, "redo", {})
+
+
+def commit(ctx: Context, req: P.RefineCommit):
+    from arboretum_library.model import Provenance
+    from arboretum_server.decompose.examples import make_examples
+
+    def then(s: Session, d: RefineDraft) -> P.LibraryImported:
+        dec = d.current
+        lib = ctx.library()
+        prov = Provenance(d.name, "", dec.options.species, dec.options.as_dict())
+        stem = "".join(c if c.isalnum() or c in "-_" else "-" for c in d.name)[:60] or "scan"
+        examples = make_examples(dec.hbl, prov, lambda: lib.new_id(stem), lib.add)
+        return P.LibraryImported(ids=tuple(e.id for e in examples), stats={"lobes": len(dec.lobes)})
+
+    return _with_draft(ctx, req.session, then)
+
+
+HANDLERS = {
+    P.RefineOpen: open_scan, P.RefinePoints: points, P.RemoveLobe: remove_lobe, P.InsertLobe: insert_lobe,
+    P.MergeLobes: merge_lobes, P.SplitLobe: split_lobe, P.RefineUndo: undo, P.RefineRedo: redo,
+    P.RefineCommit: commit,
+}

@@ -1,0 +1,73 @@
+"""Durable refinement drafts: the scan a draft was decomposed from, and a journal of its edits.
+
+``ID.refine.npz`` (``save_record``: atomic) holds the scan, its options and a generation token;
+``ID.refine.journal`` holds each refinement edit (remove / insert / merge / split lobe, undo, redo) with
+that token, appended before the reply. After a restart the draft is rebuilt by decomposing the scan
+again (deterministic: seeded) and replaying the edits of the current generation, in a worker process.
+"""
+
+from __future__ import annotations
+
+import secrets
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from arboretum_library.codec import load_record, save_record
+from arboretum_server.assembly.state import append_entry, pack_arrays, read_journal, unpack_arrays
+
+
+@dataclass(frozen=True, eq=False)
+class RefineSource:
+    """What a refinement draft was decomposed from."""
+
+    points: np.ndarray
+    """(N, 3) float64, metres: the scan as sent."""
+    labels: np.ndarray
+    """(N,) uint8 WOOD/LEAF labels, or (0,) when none were sent."""
+    name: str = "scan"
+    species: str = "unknown"
+    options: dict = field(default_factory=dict)
+    """DecomposeOptions fields as sent."""
+    generation: str = ""
+    """Token that this draft's journal entries carry."""
+
+
+def _paths(folder: Path, sid: str) -> tuple[Path, Path]:
+    return folder / f"{sid}.refine.npz", folder / f"{sid}.refine.journal"
+
+
+def start(folder: Path, sid: str, points: np.ndarray, labels: np.ndarray | None, name: str, species: str,
+          options: dict) -> RefineSource:
+    """Record a new draft's source (replacing any earlier draft of the session)."""
+    src = RefineSource(np.asarray(points, np.float64), np.zeros(0, np.uint8) if labels is None else labels,
+                       name, species, dict(options), secrets.token_hex(8))
+    source, journal = _paths(folder, sid)
+    save_record(source, src)
+    journal.unlink(missing_ok=True)
+    return src
+
+
+def append(folder: Path, sid: str, generation: str, kind: str, args: dict, arrays: dict | None = None,
+           fsync: bool = False) -> None:
+    """Journal one refinement edit."""
+    entry = {"gen": generation, "kind": kind, "args": args, "arrays": pack_arrays(arrays or {})}
+    append_entry(_paths(folder, sid)[1], entry, fsync)
+
+
+def load(folder: Path, sid: str) -> tuple[RefineSource, list[dict]] | None:
+    """The saved source and its edits (``kind``, ``args`` with arrays merged in), or None."""
+    source, journal = _paths(folder, sid)
+    if not source.exists():
+        return None
+    src = load_record(source, RefineSource)
+    entries, _ = read_journal(journal)
+    ops = [{"kind": e["kind"], "args": {**e["args"], **unpack_arrays(e["arrays"])}}
+           for e in entries if e.get("gen") == src.generation]
+    return src, ops
+
+
+def delete(folder: Path, sid: str) -> None:
+    for p in _paths(folder, sid):
+        p.unlink(missing_ok=True)
