@@ -79,3 +79,12 @@ def open_window(size: tuple[int, int], title: str = "Arboretum", visible: bool =
         glfw.terminate()
         raise ContextError(f"cannot open a GL {GL_VERSION / 100:.1f} window: {exc}") from None
     return Window(handle, ctx)
+
+
+def current_context() -> moderngl.Context:
+    """A moderngl context over the GL context current on this thread (one made by someone else, e.g.
+    pyopenxr's context provider for VR)."""
+    try:
+        return moderngl.create_context(require=GL_VERSION)
+    except Exception as exc:
+        raise ContextError(f"no usable OpenGL {GL_VERSION / 100:.1f} context is current ({exc})") from None

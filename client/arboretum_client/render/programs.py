@@ -17,6 +17,7 @@ PROGRAMS: dict[str, tuple[str, ...]] = {
     "points": ("points.vert.glsl", "points.frag.glsl"),
     "lines": ("lines.vert.glsl", "lines.geom.glsl", "flat.frag.glsl"),
     "background": ("background.vert.glsl", "background.frag.glsl"),
+    "ui": ("ui.vert.glsl", "ui.frag.glsl"),
 }
 """Program name -> (vertex, [geometry,] fragment) shader file names."""
 

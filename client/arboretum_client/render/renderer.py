@@ -56,6 +56,11 @@ class Renderer:
         self._background = ctx.vertex_array(self.programs.color["background"], [])
         self._make_framebuffers()
         self.batches: list[buffers.Batch] = []
+        self.overlay: list[buffers.Batch] = []
+        self.highlight: dict = {}
+        self._ui_tex: moderngl.Texture | None = None
+        self._ui_on = False
+        self._ui_vao = ctx.vertex_array(self.programs.color["ui"], [])
         self.grid: buffers.Batch | None = None
         self.stats = FrameStats()
         self._camera: Camera | None = None
@@ -76,23 +81,54 @@ class Renderer:
     def upload(self, scene: Scene) -> None:
         """Replace the GPU copy of the scene (buffers are built here, not per frame)."""
         self.clear_scene()
-        ctx, progs = self.ctx, self.programs
+        self.batches = self._build(scene)
+        self.grid = self._grid_batch(scene.grid) if scene.grid else None
+        self._pick_valid = False
+
+    def upload_overlay(self, scene: Scene) -> None:
+        """Replace the overlay: small, often-changing items (hands, strokes, gizmos) drawn with the
+        scene but never picked and never forcing the scene's buffers to be rebuilt."""
+        for b in self.overlay:
+            b.release()
+        self.overlay = self._build(scene)
+
+    def _build(self, scene: Scene) -> list[buffers.Batch]:
+        ctx, progs, out = self.ctx, self.programs, []
         lines = [it for it in scene.items if isinstance(it, Polyline)]
         tubes = [p for p in lines if p.style == "tube"]
         if tubes:
-            self.batches.append(buffers.tubes_batch(ctx, progs, tubes))
+            out.append(buffers.tubes_batch(ctx, progs, tubes))
         for width in sorted({p.width_px for p in lines if p.style == "line"}):
             group = [p for p in lines if p.style == "line" and p.width_px == width]
-            self.batches.append(buffers.segments_batch(ctx, progs, *buffers.polyline_segments(group), width))
+            out.append(buffers.segments_batch(ctx, progs, *buffers.polyline_segments(group), width))
         for it in scene.items:
             if isinstance(it, Mesh) and len(it.faces):
-                self.batches.append(buffers.mesh_batch(ctx, progs, it))
+                out.append(buffers.mesh_batch(ctx, progs, it))
             elif isinstance(it, InstancedMesh) and len(it.matrices) and len(it.mesh.faces):
-                self.batches.append(buffers.instanced_batch(ctx, progs, it))
+                out.append(buffers.instanced_batch(ctx, progs, it))
             elif isinstance(it, PointSet) and len(it.points):
-                self.batches.append(buffers.points_batch(ctx, progs, it))
-        self.grid = self._grid_batch(scene.grid) if scene.grid else None
-        self._pick_valid = False
+                out.append(buffers.points_batch(ctx, progs, it))
+        return out
+
+    def set_highlight(self, ids: tuple[int | None, int | None], colors: tuple[tuple, tuple]) -> None:
+        """Tint the items with pick ids ``ids`` (left hand, right hand; None = nothing) in ``colors``."""
+        self.highlight = {"u_hl_ids": tuple(-1.0 if i is None else float(i) for i in ids),
+                          "u_hl_color0": colors[0], "u_hl_color1": colors[1]}
+
+    def set_ui_image(self, image: np.ndarray | None) -> None:
+        """The 2D UI layer: an (H, W, 4) uint8 RGBA image at the output size drawn over every frame
+        (None removes it). Upload only when it changes; drawing it is one call."""
+        if image is None:
+            self._ui_on = False
+            return
+        h, w = image.shape[:2]
+        if self._ui_tex is None or self._ui_tex.size != (w, h):
+            if self._ui_tex is not None:
+                self._ui_tex.release()
+            self._ui_tex = self.ctx.texture((w, h), 4)
+            self._ui_tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self._ui_tex.write(np.ascontiguousarray(image, np.uint8).tobytes())
+        self._ui_on = True
 
     def _grid_batch(self, g: Grid) -> buffers.Batch:
         n = int(np.floor(g.half_size / g.spacing))
@@ -116,7 +152,8 @@ class Renderer:
         vp = camera.projection_matrix(w / h) @ camera.view_matrix()
         return {"u_view_proj": vp, "u_eye": camera.eye, "u_sky": SKY, "u_ground": GROUND,
                 "u_viewport": (w * scale / 2, h * scale / 2), "u_top": BACKGROUND_TOP,
-                "u_bottom": BACKGROUND_BOTTOM}
+                "u_bottom": BACKGROUND_BOTTOM, "u_hl_ids": (-1.0, -1.0), "u_hl_color0": (0, 0, 1),
+                "u_hl_color1": (1, 0, 0), **self.highlight}
 
     def _draw(self, batch: buffers.Batch, pick: bool, frame: dict, scale: int) -> None:
         prog = (self.programs.pick if pick else self.programs.color)[batch.program]
@@ -150,11 +187,27 @@ class Renderer:
         self._background.render(moderngl.TRIANGLES, vertices=3)
         self.stats.draw_calls += 1
         ctx.enable(moderngl.DEPTH_TEST | moderngl.PROGRAM_POINT_SIZE)
-        for b in ([self.grid] if self.grid else []) + [b for b in self.batches if not b.translucent]:
+        for b in ([self.grid] if self.grid else []) + [b for b in self.batches + self.overlay if not b.translucent]:
             self._draw(b, False, frame, s)
         self._translucent_pass(camera, frame)
+        if self._ui_on and self._ui_tex is not None:
+            self._draw_ui()
         self._camera, self._pick_valid = camera, False
         return self.stats
+
+    def _draw_ui(self) -> None:
+        ctx = self.ctx
+        ctx.disable(moderngl.DEPTH_TEST)
+        ctx.enable(moderngl.BLEND)
+        ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+        assert self._ui_tex is not None
+        self._ui_tex.use(0)
+        sampler = self.programs.color["ui"]["u_ui"]
+        assert isinstance(sampler, moderngl.Uniform)
+        sampler.value = 0
+        self._ui_vao.render(moderngl.TRIANGLES, vertices=3)
+        self.stats.draw_calls += 1
+        ctx.disable(moderngl.BLEND)
 
     def resolve(self) -> None:
         """Resolve the multisampled image into ``framebuffer`` (waits for the frame's rendering)."""
@@ -163,7 +216,7 @@ class Renderer:
 
     def _translucent_pass(self, camera: Camera, frame: dict) -> None:
         ctx, eye = self.ctx, camera.eye
-        glass = sorted((b for b in self.batches if b.translucent), key=lambda b: -np.linalg.norm(b.centre - eye))
+        glass = sorted((b for b in self.batches + self.overlay if b.translucent), key=lambda b: -np.linalg.norm(b.centre - eye))
         if not glass:
             return
         ctx.enable(moderngl.BLEND | moderngl.CULL_FACE)
@@ -175,6 +228,12 @@ class Renderer:
                 self._draw(b, False, frame, self.scale)
         self._fbo.depth_mask = True
         ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
+
+    def present(self, target: moderngl.Framebuffer | None = None) -> None:
+        """Copy the resolved image into ``target``: a window's ``ctx.screen``, or (None) whatever
+        framebuffer is bound now, e.g. an OpenXR swapchain image's. Sizes must match (no supersampling)."""
+        dst = target if target is not None else self.ctx.detect_framebuffer()
+        self.ctx.copy_framebuffer(dst, self.framebuffer)
 
     def read(self) -> np.ndarray:
         """The last frame as an (H, W, 4) uint8 RGBA image, top row first, at the output size."""
@@ -225,6 +284,12 @@ class Renderer:
         """Free every GL object of this renderer and bind the default framebuffer again (binding a
         deleted framebuffer later would be a GL error)."""
         self.clear_scene()
+        for b in self.overlay:
+            b.release()
+        self.overlay = []
+        if self._ui_tex is not None:
+            self._ui_tex.release()
+        self._ui_vao.release()
         (self.ctx.screen or self.ctx.detect_framebuffer(0)).use()
         fbos = {self._fbo, self._id_fbo, self.framebuffer}
         for fbo in fbos:

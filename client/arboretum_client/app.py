@@ -1,0 +1,229 @@
+"""The interactive client's frame: input -> hands -> tools -> scene -> renderer, never waiting on the net.
+
+``App`` owns the state, the network worker, the interaction tools and a ``Renderer`` (of a glfw window
+or of an EGL context: the same code path for windows, scripts and tests). One call to ``frame`` does:
+
+1. drain finished network jobs (callbacks update the state);
+2. turn this frame's hand samples (desktop or VR) into events, find what each hand touches (the ID
+   buffer under the desktop cursor, or the nearest item to a VR touch ball), and hand events to tools;
+3. rebuild the scene only when ``state.scene_version`` changed, the overlay only when the hands or
+   strokes moved, the UI image only when the state or a job's progress changed;
+4. issue the frame's draw calls.
+
+Per-frame Python work is O(draw calls): nothing iterates over vertices unless something changed.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from .camera import Camera, fit_camera
+from .input.desktop import DesktopInput, Key, MouseButton, MouseMove
+from .input.hands import HAND_COLORS, LEFT, RIGHT, SIDES, Hands, HandSample
+from .net import Worker
+from .overlay import overlay_key, overlay_scene
+from .session_port import SessionPort
+from .tools.actions import Actions
+from .tools.interaction import Interaction
+from .tools.state import MODELING, REFINEMENT, ClientState
+from .tools.view import TouchIndex, build_scene
+from .ui.layout import draw_ui, ui_key
+from .ui.widgets import Canvas
+
+PANEL_PX = 260
+"""Width of the side panel in pixels."""
+TOUCH_RADIUS = 0.06
+"""Metres: a VR touch ball this close to an item touches it."""
+
+
+class App:
+    """One client: state, worker, tools, desktop input and a renderer."""
+
+    def __init__(self, renderer, port_factory: Callable[[], SessionPort], out_dir: str | Path = ".",
+                 clock: Callable[[], float] = time.monotonic, ui: bool = True,
+                 scan: tuple[np.ndarray, np.ndarray | None] | None = None) -> None:
+        self.renderer, self.size = renderer, renderer.size
+        self.clock, self.out_dir, self.ui_enabled, self.scan = clock, Path(out_dir), ui, scan
+        self.state = ClientState()
+        self.worker = Worker(port_factory)
+        self.actions = Actions(self.state, self.worker, clock)
+        self.interaction = Interaction(self.state, self.actions)
+        self.camera = Camera(target=(0.0, 0.0, 0.8), distance=4.0)
+        self.desktop = DesktopInput(self.camera, self.size)
+        self.hands = Hands()
+        self.touched: dict[str, str | None] = {LEFT: None, RIGHT: None}
+        self.touch = TouchIndex(np.zeros((0, 3)), np.zeros(0, np.int32))
+        self.names: dict[int, str] = {}
+        self.bounds = np.array([[-1.0, -1.0, 0.0], [1.0, 1.0, 2.0]])
+        """(2, 3) bounds of the scene drawn now."""
+        self.canvas: Canvas | None = None
+        self._uploaded, self._overlay, self._ui, self._framed = -1, None, None, False
+        self._last_pixel: dict[str, tuple | None] = {LEFT: None, RIGHT: None}
+        self.vr_samples: Callable[[], list[HandSample]] | None = None
+        """Set by the VR backend: hand samples come from the headset instead of the mouse."""
+
+    def start(self) -> None:
+        self.actions.refresh_library()
+        self.actions.sync()
+
+    # -- input -------------------------------------------------------------------------------------
+    def handle(self, event) -> None:
+        """A desktop input record (mouse, scroll, key); panels get first refusal."""
+        s = self.state
+        if isinstance(event, MouseButton) and event.button == "left" and self.canvas is not None:
+            x, y = self.desktop.mouse
+            if self.canvas.covers(x, y):
+                if event.pressed:
+                    self.ui_action(self.canvas.hit(x, y) or "noop")
+                return
+        if isinstance(event, Key) and s.search_focus and event.pressed and event.name not in ("ctrl", "shift", "alt"):
+            self._type(event.name)
+            return
+        self.desktop.handle(event)
+
+    def _type(self, name: str) -> None:
+        s = self.state
+        if name == "enter":
+            s.search_focus = False
+            self.actions.search(s.query)
+        elif name == "escape":
+            s.search_focus = False
+        elif name == "backspace":
+            s.query = s.query[:-1]
+        elif name == "space":
+            s.query += " "
+        elif len(name) == 1:
+            s.query += name
+        s.ui_version += 1
+
+    def ui_action(self, action: str) -> None:
+        """Run a panel button's action (also used by scripts)."""
+        s, a = self.state, self.actions
+        head, _, arg = action.partition(":")
+        simple = {"undo": a.undo, "redo": a.redo, "menu": self.interaction.menu, "touchpad": self.interaction.touchpad,
+                  "grow": a.grow, "export": lambda: a.export(self.out_dir), "mode": self.toggle_mode,
+                  "save": lambda: a.save(self.out_dir / "session.npz"), "commit": a.commit_refinement,
+                  "load": lambda: a.load(self.out_dir / "session.npz"), "noop": lambda: None}
+        if action in simple:
+            simple[action]()
+        elif head == "search":
+            s.search_focus = True
+        elif head == "tag":
+            s.tag_filter = "" if s.tag_filter == arg else arg
+            a.refresh_library()
+        elif head == "choose":
+            a.choose(arg)
+        elif head == "toggle":
+            setattr(s, arg, not getattr(s, arg))
+            s.touch_scene()
+        elif head == "density":
+            a.set_density(s.density * (1.25 if arg == "+" else 0.8))
+        elif head == "focus":
+            s.focus += 1
+            s.touch_scene()
+        s.ui_version += 1
+
+    def toggle_mode(self) -> None:
+        s = self.state
+        s.mode = MODELING if s.mode == REFINEMENT else REFINEMENT
+        s.selection, s.strokes = [], []
+        if s.mode == REFINEMENT and s.draft is None:
+            pts, labels = self.scan if self.scan is not None else (np.zeros((0, 3)), None)
+            self.actions.refine_open(pts, labels)
+        self._framed = False
+        s.touch_scene()
+
+    KEYS = {"ctrl+z": "undo", "ctrl+y": "redo", "delete": "menu", "enter": "touchpad", "g": "grow", "x": "export",
+            "ctrl+s": "save", "ctrl+o": "load", "tab": "mode", "p": "toggle:show_points", "o": "toggle:show_all",
+            "n": "focus:+", "]": "density:+", "[": "density:-", "/": "search:focus", "c": "commit"}
+
+    def _shortcuts(self) -> None:
+        for key in self.desktop.take_keys():
+            if key == "escape":
+                self.state.selection, self.state.strokes = [], []
+                self.state.point_selection = np.zeros(0, np.int64)
+                self.state.touch_scene()
+            elif key in self.KEYS:
+                self.ui_action(self.KEYS[key])
+
+    # -- frame -------------------------------------------------------------------------------------
+    def update(self, dt: float = 1 / 60) -> list:
+        """Steps 1-3 of a frame (everything but drawing); returns the hand events handled."""
+        now = self.clock()
+        self.worker.drain()
+        self.desktop.advance(dt)
+        samples = self.vr_samples() if self.vr_samples is not None else self.desktop.samples()
+        events = self.hands.update(samples, now)
+        self._update_touch(samples)
+        for ev in events:
+            self.interaction.handle(ev, self.touched[ev.side])
+        self._shortcuts()
+        self._sync_scene(now)
+        self._sync_overlay(samples)
+        self._sync_ui()
+        self.renderer.set_highlight(tuple(self._touched_id(s) for s in SIDES), (HAND_COLORS[LEFT], HAND_COLORS[RIGHT]))
+        return events
+
+    def frame(self, camera=None):
+        """Update and issue one frame; returns the renderer's stats."""
+        self.update()
+        return self.renderer.render(camera or self.desktop.camera)
+
+    def _touched_id(self, side: str) -> int | None:
+        name = self.touched[side]
+        return next((k for k, v in self.names.items() if v == name), None) if name else None
+
+    def _update_touch(self, samples: list[HandSample]) -> None:
+        for s in samples:
+            if self.interaction.drags.get(s.side) is not None:
+                continue  # keep touching what is being dragged
+            if s.pixel is not None:
+                if s.pixel != self._last_pixel[s.side] and self.renderer._camera is not None:
+                    self._last_pixel[s.side] = s.pixel
+                    self.touched[s.side] = self.names.get(self.renderer.pick(int(s.pixel[0]), int(s.pixel[1])) or 0)
+            elif s.tracked:
+                pid = self.touch.nearest(s.position, TOUCH_RADIUS)
+                self.touched[s.side] = self.names.get(pid or 0)
+
+    def _sync_scene(self, now: float) -> None:
+        s = self.state
+        flashing = any(t > now for t in s.merged_flash.values())
+        if s.scene_version == self._uploaded and not flashing:
+            return
+        if not flashing:
+            s.merged_flash.clear()
+        scene, self.touch = build_scene(s, now)
+        self.renderer.upload(scene)
+        self.names, self._uploaded, self.bounds = scene.names, s.scene_version, scene.bounds()
+        self._last_pixel = {LEFT: None, RIGHT: None}
+        if not self._framed and scene.items:
+            self.desktop.camera = fit_camera(scene.bounds(), "iso", self.size[0] / self.size[1])
+            if self.ui_enabled:
+                self.desktop._pan(PANEL_PX / 2, 0.0)  # keep the tree clear of the side panel
+            self._framed = True
+
+    def _sync_overlay(self, samples: list[HandSample]) -> None:
+        key = overlay_key(self.state, samples, self.interaction.drags)
+        if key != self._overlay:
+            self._overlay = key
+            self.renderer.upload_overlay(overlay_scene(self.state, samples, self.interaction.drags,
+                                                       self.desktop.camera.distance))
+
+    def _sync_ui(self) -> None:
+        if not self.ui_enabled:
+            return
+        key = ui_key(self.state, self.worker.running)
+        if key != self._ui:
+            self._ui = key
+            self.canvas = draw_ui(self.size, self.state, self.worker.running)
+            self.renderer.set_ui_image(self.canvas.rgba())
+
+    def move_mouse(self, x: float, y: float) -> None:
+        self.handle(MouseMove(x, y))
+
+    def close(self) -> None:
+        self.worker.close()

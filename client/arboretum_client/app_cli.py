@@ -1,0 +1,196 @@
+"""``arboretum client``: the interactive client (desktop window, VR, or a headless script).
+
+    arboretum client [--connect ADDRESS | --offline] [--library LIB] [--scan FILE] [--size WxH]
+                     [--headless] [--script S] [--screenshot out.png] [--vr] [--out DIR] [--json]
+
+Without ``--connect`` (and without ``--offline``, which uses built-in demo examples and no server) an
+embedded ``arboretum serve`` starts as a child process on a free loopback port and stops on exit.
+``--headless`` renders with EGL (no display); ``--script`` feeds recorded input (see
+``arboretum_client.scripts``), in a window too; ``--screenshot`` saves the last frame. ``--vr`` uses an
+OpenXR runtime when one is present and otherwise says why and opens the desktop window.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from arboretum_library.cli import add_json_flag, emit
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("client", help="the interactive tree-modeling client (desktop, VR or headless)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--connect", metavar="ADDRESS", help="server endpoint, e.g. tcp://127.0.0.1:5555")
+    where.add_argument("--offline", action="store_true", help="no server: built-in demo examples in memory")
+    p.add_argument("--library", metavar="LIB", help="example library for the embedded server")
+    p.add_argument("--scan", metavar="FILE", help="point cloud to refine (refinement mode, Tab)")
+    p.add_argument("--size", default="1280x720", help="window or image size WIDTHxHEIGHT (default 1280x720)")
+    p.add_argument("--headless", action="store_true", help="render without a display (EGL); needs --script")
+    p.add_argument("--script", metavar="S", help="JSON/YAML script of input events and tool actions")
+    p.add_argument("--screenshot", metavar="PNG", help="save the last frame as PNG")
+    p.add_argument("--vr", action="store_true", help="use an OpenXR headset when a runtime is present")
+    p.add_argument("--out", default=".", metavar="DIR", help="folder for exports and session saves (default .)")
+    p.add_argument("--frames", type=int, default=0, help=argparse.SUPPRESS)  # window tests: close after N frames
+    add_json_flag(p)
+    p.set_defaults(func=run)
+
+
+def _port_factory(args, cleanup: list):
+    """A zero-argument function making the session port (run on the worker thread)."""
+    if args.offline:
+        from .session_fake import FakeSession
+
+        return FakeSession
+    from .session_remote import RemoteSession
+
+    endpoint = args.connect
+    if endpoint is None:
+        from .embedded import start_server
+
+        server = start_server(args.library)
+        cleanup.append(server.stop)
+        endpoint = server.endpoint
+    return lambda: RemoteSession(endpoint)
+
+
+def _scan(path: str | None):
+    if not path:
+        return None
+    from arboretum_library.pointio import read_points
+
+    cloud = read_points(path)
+    return cloud.points, getattr(cloud, "labels", None)
+
+
+def run(args: argparse.Namespace) -> int:
+    from arboretum_library.errors import InputError
+
+    from .render_cli import parse_size
+
+    size = parse_size(args.size)
+    if args.headless and not args.script:
+        raise InputError("--headless needs --script S (there is no one to click)")
+    cleanup: list = []
+    try:
+        factory = _port_factory(args, cleanup)
+        scan = _scan(args.scan)
+        if args.headless:
+            data = _run_headless(args, size, factory, scan)
+        else:
+            data = _run_interactive(args, size, factory, scan)
+    finally:
+        for fn in cleanup:
+            fn()
+    emit(args, data, f"{data['frames']} frames, {data['placements']} placements, status: {data['status']}")
+    return 0
+
+
+def _summary(app, runner_frames: int, shots) -> dict:
+    s = app.state
+    return {"frames": runner_frames, "placements": len(s.assembly.placements), "revision": s.revision,
+            "status": s.status, "errors": s.errors, "screenshots": [str(p) for p in shots],
+            "draw_calls": app.renderer.stats.draw_calls, "exported": s.exported}
+
+
+def _script_steps(args) -> list:
+    from .scripts import load_script
+
+    steps = list(load_script(args.script)["steps"]) if args.script else []
+    if args.screenshot:
+        steps.append({"screenshot": str(Path(args.screenshot).resolve())})
+    return steps
+
+
+def _run_headless(args, size, factory, scan) -> dict:
+    from .app import App
+    from .headless import OffscreenRenderer
+    from .scripts import ScriptRunner
+
+    with OffscreenRenderer(size) as off, off.ctx:
+        holder: list = []
+        app = App(off.renderer, factory, args.out, clock=lambda: holder[0].clock(), scan=scan)
+        runner = ScriptRunner(app, base=Path("."))
+        holder.append(runner)
+        try:
+            app.start()
+            shots = runner.run(_script_steps(args))
+            return _summary(app, int(round(runner.now / runner.dt)), shots)
+        finally:
+            app.close()
+
+
+def _run_interactive(args, size, factory, scan) -> dict:
+    from .context import open_window
+
+    if args.vr:
+        from .input.openxr import VrUnavailable, open_runtime
+
+        try:
+            return _run_vr(args, open_runtime(), factory, scan)
+        except VrUnavailable as exc:
+            print(f"VR: {exc}", file=sys.stderr)
+    win = open_window(size, "Arboretum")
+    try:
+        return _window_loop(args, win, size, factory, scan)
+    finally:
+        win.close()
+
+
+def _window_loop(args, win, size, factory, scan) -> dict:
+    import glfw
+
+    from .app import App
+    from .render.renderer import Renderer
+    from .scripts import ScriptRunner
+    from .window_input import install_callbacks
+
+    renderer = Renderer(win.ctx, size)
+    app = App(renderer, factory, args.out, scan=scan)
+    install_callbacks(win.handle, app)
+    app.start()
+    shots, frames = [], 0
+    try:
+        if args.script or args.screenshot:  # scripted: virtual time, same App, shown in the window
+            runner = ScriptRunner(app, base=Path("."))
+            app.clock = runner.clock
+            app.actions.clock = runner.clock
+            shots = runner.run(_script_steps(args))
+            frames = int(round(runner.now / runner.dt))
+        last = time.monotonic()
+        while not glfw.window_should_close(win.handle) and not (args.script and frames) and \
+                not (args.frames and frames >= args.frames):
+            glfw.poll_events()
+            now = time.monotonic()
+            app.update(now - last)
+            last = now
+            renderer.render(app.desktop.camera)
+            renderer.present(win.ctx.screen)
+            win.swap()
+            frames += 1
+        return _summary(app, frames, shots)
+    finally:
+        app.close()
+        renderer.release()
+
+
+def _run_vr(args, runtime, factory, scan) -> dict:
+    """Untested here (no OpenXR runtime): the logic in ``VrSession`` is tested with a fake runtime."""
+    from .app import App
+    from .context import current_context
+    from .input.openxr import VrSession
+    from .render.renderer import Renderer
+
+    ctx = current_context()
+    sc = runtime.context.swapchains[0]  # type: ignore[attr-defined]
+    renderer = Renderer(ctx, (sc.width, sc.height))
+    app = App(renderer, factory, args.out, scan=scan, ui=False)
+    app.start()
+    try:
+        frames = VrSession(app, runtime).run(args.frames or None)
+        return _summary(app, frames, [])
+    finally:
+        app.close()
+        runtime.close()

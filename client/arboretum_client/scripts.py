@@ -1,0 +1,185 @@
+"""Run the client from a script of input events, headless (EGL), and take screenshots.
+
+A script is JSON (or YAML when PyYAML is installed): ``{"steps": [...]}`` or the bare list. Each step is
+one input on the same code path as a window (mouse/keys into ``App.handle``; VR-style hand samples into
+the hands model), followed by frames until the network worker is idle. Time is virtual: frames advance
+a clock by ``1 / fps`` seconds, so long presses are reproducible.
+
+Steps (one key each):
+- ``{"mouse": [x, y]}`` / ``{"world": [x, y, z]}``: move the cursor to a pixel / to where a point projects;
+- ``{"press": "left"}``, ``{"release": "left"}``, ``{"click": "left"}`` (press and release in one frame);
+- ``{"key": "tab"}`` (press and release), ``{"hold": "ctrl"}``, ``{"unhold": "ctrl"}``;
+- ``{"wait": seconds}``: run frames; ``{"action": "grow"}``: a panel action (see ``App.ui_action``);
+- ``{"stroke": [[x, y, z], ...]}``: draw a stroke with the left mouse button through world points;
+- ``{"drag": {"from": [x, y, z], "to": [x, y, z], "button": "right"}}``: a grip drag between points;
+- ``{"hands": [{"side": "left", "position": [x, y, z], "buttons": ["grip"]}, ...]}``: VR-style hand
+  samples (kept until ``{"hands": null}``);
+- ``{"select": ["lobe:2", "lobe:5"]}``: select by pick name (as trigger clicks would);
+- ``{"view": "iso"}``: frame the scene from a named view; ``{"screenshot": "out.png"}``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from arboretum_library.errors import InputError
+
+from .camera import fit_camera
+from .input.desktop import Key, MouseButton, MouseMove
+from .input.hands import LONG_PRESS, HandSample
+
+
+def load_script(path: str | Path) -> dict:
+    """Read a script file (JSON, or YAML by suffix) into ``{"steps": [...]}``."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise InputError(f"script {path}: cannot read it ({exc.strerror})") from None
+    try:
+        if path.suffix in (".yaml", ".yml"):
+            import yaml
+
+            data = yaml.safe_load(text)
+        else:
+            data = json.loads(text)
+    except Exception as exc:
+        raise InputError(f"script {path}: not valid {path.suffix[1:] or 'JSON'} ({exc})") from None
+    if isinstance(data, list):
+        data = {"steps": data}
+    if not isinstance(data, dict) or not isinstance(data.get("steps"), list):
+        raise InputError(f"script {path}: expected a list of steps or {{'steps': [...]}}")
+    return data
+
+
+class ScriptRunner:
+    """Drives an ``App`` (whose clock is ``self.now``) through script steps."""
+
+    def __init__(self, app, fps: float = 30.0, base: Path | None = None) -> None:
+        self.app, self.dt, self.now = app, 1.0 / fps, 0.0
+        self.base = base or Path(".")
+        self.shots: list[Path] = []
+        self.hand_samples: list[HandSample] | None = None
+
+    def clock(self) -> float:
+        return self.now
+
+    def tick(self, n: int = 1) -> None:
+        for _ in range(n):
+            self.now += self.dt
+            self.app.frame()
+
+    def settle(self) -> None:
+        """Frames until no network job runs (scripts may wait; the interactive loop never does)."""
+        self.tick()
+        for _ in range(200):
+            if self.app.worker.wait_idle(30.0):
+                self.tick()
+                if self.app.worker.idle():
+                    return
+        raise InputError("script: the server did not answer within the time limit")
+
+    def to_pixel(self, p) -> tuple[float, float]:
+        px = self.app.desktop.camera.project(np.asarray(p, float)[None], self.app.size)[0]
+        return float(px[0]), float(px[1])
+
+    def run(self, steps: list[dict]) -> list[Path]:
+        for i, step in enumerate(steps):
+            if not isinstance(step, dict) or len(step) != 1:
+                raise InputError(f"script step {i + 1}: expected one key, got {step!r}")
+            (name, arg), = step.items()
+            handler = getattr(self, f"_step_{name}", None)
+            if handler is None:
+                raise InputError(f"script step {i + 1}: unknown step {name!r}")
+            handler(arg)
+            self.settle()
+        return self.shots
+
+    # -- steps -------------------------------------------------------------------------------------
+    def _step_mouse(self, xy) -> None:
+        self.app.handle(MouseMove(float(xy[0]), float(xy[1])))
+
+    def _step_world(self, p) -> None:
+        self.app.handle(MouseMove(*self.to_pixel(p)))
+
+    def _step_press(self, button: str) -> None:
+        self.app.handle(MouseButton(button, True))
+
+    def _step_release(self, button: str) -> None:
+        self.app.handle(MouseButton(button, False))
+
+    def _step_click(self, button: str) -> None:
+        self.app.handle(MouseButton(button, True))
+        self.tick()
+        self.app.handle(MouseButton(button, False))
+
+    def _step_key(self, name: str) -> None:
+        self.app.handle(Key(name, True))
+        self.tick()
+        self.app.handle(Key(name, False))
+
+    def _step_hold(self, name: str) -> None:
+        self.app.handle(Key(name, True))
+
+    def _step_unhold(self, name: str) -> None:
+        self.app.handle(Key(name, False))
+
+    def _step_wait(self, seconds: float) -> None:
+        self.tick(max(int(round(float(seconds) / self.dt)), 1))
+
+    def _step_action(self, action: str) -> None:
+        self.app.ui_action(action)
+
+    def _step_select(self, names) -> None:
+        """Select pick names directly ('inst:NAME', 'inst:NAME/lobe:2', 'lobe:3'), as a trigger click would."""
+        self.app.state.selection = [names] if isinstance(names, str) else list(names)
+        self.app.state.touch_scene()
+
+    def _step_view(self, view: str) -> None:
+        self.app.desktop.camera = fit_camera(self.app.bounds, view, self.app.size[0] / self.app.size[1])
+        if self.app.ui_enabled:
+            self.app.desktop._pan(130.0, 0.0)  # keep the tree clear of the side panel
+
+    def _step_stroke(self, points) -> None:
+        pts = np.asarray(points, float).reshape(-1, 3)
+        self._step_world(pts[0])
+        self.app.handle(MouseButton("left", True))
+        self.tick(int(LONG_PRESS / self.dt) + 2)
+        for p in pts[1:]:
+            self._step_world(p)
+            self.tick()
+        self.app.handle(MouseButton("left", False))
+
+    def _step_drag(self, spec: dict) -> None:
+        button = spec.get("button", "right")
+        self._step_world(spec["from"])
+        self.tick()
+        self.app.handle(MouseButton(button, True))
+        self.tick()
+        a, b = np.asarray(spec["from"], float), np.asarray(spec["to"], float)
+        for t in np.linspace(0, 1, 6)[1:]:
+            self._step_world(a + t * (b - a))
+            self.tick()
+        self.app.handle(MouseButton(button, False))
+
+    def _step_hands(self, specs) -> None:
+        if specs is None:
+            self.app.vr_samples = None
+            return
+        samples = []
+        for spec in specs:
+            T = np.eye(4)
+            T[:3, 3] = spec["position"]
+            samples.append(HandSample(spec["side"], T, buttons=frozenset(spec.get("buttons", ()))))
+        self.app.vr_samples = lambda: samples
+
+    def _step_screenshot(self, path: str) -> None:
+        from .headless import save_png
+
+        self.tick()
+        out = self.base / path
+        save_png(self.app.renderer.read()[..., :3], out)
+        self.shots.append(out)

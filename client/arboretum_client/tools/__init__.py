@@ -1,0 +1,1 @@
+"""Interaction tools: client state, actions over the session port, hand-event routing, drag maths, scene views."""

@@ -1,0 +1,209 @@
+"""Tool actions: each submits one port call to the worker and applies the reply to the state.
+
+The same actions serve hands, keyboard shortcuts, panels and scripts. Replies are applied on the main
+thread (``Worker.drain``); nothing here waits.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from arboretum_client.net import Worker
+from arboretum_library.codec import load_record, save_record
+from arboretum_library.model import Assembly
+from arboretum_library.protocol import Edit, RefineState, SessionAssembly
+
+from .state import REFINEMENT, ClientState
+
+
+class Actions:
+    """Named operations over the session, wired to a ``ClientState``."""
+
+    def __init__(self, state: ClientState, worker: Worker, clock=time.monotonic) -> None:
+        self.state, self.worker, self.clock = state, worker, clock
+
+    def _fail(self, what: str):
+        def on_error(exc: BaseException) -> None:
+            self.state.errors.append(f"{what}: {exc}")
+            self.state.say(f"{what} failed: {exc}")
+        return on_error
+
+    def _submit(self, name: str, call, on_done) -> int:
+        self.state.say(f"{name}...")
+        return self.worker.submit(name, call, on_done, self._fail(name))
+
+    # -- library -----------------------------------------------------------------------------------
+    def refresh_library(self) -> None:
+        tag = self.state.tag_filter
+        self._submit("list library", lambda p, _: p.list_library(tags=(tag,) if tag else ()), self._rows)
+
+    def search(self, query: str) -> None:
+        self.state.query = query
+        if not query.strip():
+            return self.refresh_library()
+
+        def call(port, _):
+            hits = port.search_library(query)
+            rows = {r["id"]: r for r in port.list_library()}
+            return [rows[h["id"]] for h in hits if h["id"] in rows]
+        self._submit("search", call, self._rows)
+
+    def _rows(self, rows: list[dict]) -> None:
+        self.state.library = list(rows)
+        self.state.say(f"{len(rows)} examples")
+
+    def choose(self, example_id: str) -> None:
+        """Choose a library example: fetched into the cache; the next select on empty space places it."""
+        self.state.chosen = example_id
+        self.fetch(example_id)
+        self.state.say(f"chose {example_id}: select a spot to place it")
+
+    def fetch(self, example_id: str) -> None:
+        if example_id in self.state.examples:
+            return
+        self._submit("get example", lambda p, _: p.get_example(example_id), self._cache)
+
+    def _cache(self, example) -> None:
+        self.state.examples[example.id] = example
+        self.state.touch_scene()
+
+    # -- modeling ----------------------------------------------------------------------------------
+    def _edit(self, name: str, call) -> int:
+        def done(edit: Edit) -> None:
+            self.state.revision, self.state.can_undo, self.state.can_redo = edit.revision, edit.can_undo, edit.can_redo
+            now = self.clock()
+            for inst in (*edit.merged, *( [edit.instance] if edit.merged else [])):
+                self.state.merged_flash[inst] = now + 2.0
+            msg = f"{edit.label or name}" + (f": merged with {', '.join(edit.merged)}" if edit.merged else "")
+            if edit.kinds:
+                msg += f" (strokes: {', '.join(edit.kinds)})"
+            self.state.say(msg)
+            self.sync()
+        return self._submit(name, lambda p, _: call(p), done)
+
+    def sync(self) -> None:
+        """Fetch the assembly (and any examples it uses that are not cached)."""
+        def call(port, _):
+            reply: SessionAssembly = port.assembly()
+            sketched = {e.id for e in reply.assembly.sketches}
+            missing = {p.example_id for p in reply.assembly.placements} - set(self.state.examples) - sketched
+            return reply, [port.get_example(i) for i in sorted(missing)]
+        self.worker.submit("sync", call, self._synced, self._fail("sync"))
+
+    def _synced(self, result) -> None:
+        reply, examples = result
+        for e in [*examples, *reply.assembly.sketches]:
+            self.state.examples[e.id] = e
+        s = self.state
+        s.assembly, s.revision, s.can_undo, s.can_redo = reply.assembly, reply.revision, reply.can_undo, reply.can_redo
+        live = {p.instance for p in reply.assembly.placements}
+        s.selection = [n for n in s.selection if n.split("/")[0].removeprefix("inst:") in live]
+        s.touch_scene()
+
+    def add_example(self, example_id: str, T_world_example: np.ndarray, scale: float = 1.0) -> int:
+        self.fetch(example_id)
+        return self._edit("add example", lambda p: p.add_example(example_id, T_world_example, scale))
+
+    def transform_example(self, instance: str, T: np.ndarray, scale: float) -> int:
+        return self._edit("transform example", lambda p: p.transform_example(instance, T, scale))
+
+    def transform_lobe(self, instance: str, lobe: int, T: np.ndarray) -> int:
+        return self._edit("transform lobe", lambda p: p.transform_lobe(instance, lobe, T))
+
+    def delete_example(self, instance: str) -> int:
+        return self._edit("delete example", lambda p: p.delete_example(instance))
+
+    def sketch(self) -> int | None:
+        strokes, self.state.strokes = list(self.state.strokes), []
+        if not strokes:
+            self.state.say("sketch: draw strokes first (hold the trigger)")
+            return None
+        self.state.touch_scene()
+        return self._edit("sketch", lambda p: p.sketch(strokes))
+
+    def undo(self) -> None:
+        if self.state.mode == REFINEMENT:
+            self._refine("undo", lambda p: p.refine_undo())
+        else:
+            self._edit("undo", lambda p: p.undo())
+
+    def redo(self) -> None:
+        if self.state.mode == REFINEMENT:
+            self._refine("redo", lambda p: p.refine_redo())
+        else:
+            self._edit("redo", lambda p: p.redo())
+
+    def save(self, path: str | os.PathLike) -> None:
+        def done(assembly: Assembly) -> None:
+            save_record(path, assembly)
+            self.state.say(f"saved {Path(path).name}")
+        self._submit("save", lambda p, _: p.save(), done)
+
+    def load(self, path: str | os.PathLike) -> None:
+        assembly = load_record(path, Assembly)
+        self._submit("load", lambda p, _: p.load(assembly), lambda _r: self.sync())
+
+    def grow(self, seed: int = 0) -> None:
+        density = self.state.density
+
+        def done(tree) -> None:
+            self.state.grown = tree
+            self.state.touch_scene()
+            self.state.say(f"grown: {len(tree.positions)} nodes, {len(tree.leaf_centres)} leaves")
+        self._submit("grow", lambda p, progress: p.grow(seed, {"density": density}, progress), done)
+
+    def set_density(self, value: float) -> None:
+        self.state.density = float(np.clip(value, 0.1, 4.0))
+        self.state.say(f"density {self.state.density:.2f}")
+
+    def export(self, folder: str | os.PathLike, fmt: str = "glb") -> None:
+        def done(reply) -> None:
+            path = Path(folder) / reply.name
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_name(f".{path.name}.tmp")
+            tmp.write_bytes(reply.data.tobytes())
+            os.replace(tmp, path)
+            self.state.exported.append(str(path))
+            self.state.say(f"exported {path.name} ({len(reply.data)} bytes)")
+        self._submit("export", lambda p, progress: p.export_mesh(fmt, 0, {"density": self.state.density}, progress),
+                     done)
+
+    # -- refinement --------------------------------------------------------------------------------
+    def _refine(self, name: str, call) -> int:
+        def done(reply: RefineState) -> None:
+            s = self.state
+            s.draft, s.selection, s.point_selection = reply.hbl, [], np.zeros(0, np.int64)
+            s.can_undo, s.can_redo = reply.can_undo, reply.can_redo
+            s.say(f"{name}: {len(reply.hbl.lobes)} lobes")
+            self.worker.submit("points", lambda p, _: p.refine_points(), self._cloud, self._fail("points"))
+            s.touch_scene()
+        return self._submit(name, lambda p, progress=None: call(p), done)
+
+    def _cloud(self, cloud) -> None:
+        self.state.cloud = cloud
+        self.state.touch_scene()
+
+    def refine_open(self, points: np.ndarray, labels: np.ndarray | None = None, species: str = "unknown") -> None:
+        self._submit("decompose", lambda p, progress: p.refine_open(points, labels, species, progress),
+                     lambda r: self._refine("open", lambda _p: r))
+
+    def remove_lobe(self, lobe: int) -> int:
+        return self._refine("remove lobe", lambda p: p.remove_lobe(lobe))
+
+    def insert_lobe(self, indices: np.ndarray) -> int:
+        idx = np.asarray(indices, np.int64)
+        return self._refine("insert lobe", lambda p: p.insert_lobe(idx))
+
+    def merge_lobes(self, lobes: list[int]) -> int:
+        return self._refine("merge lobes", lambda p: p.merge_lobes(lobes))
+
+    def split_lobe(self, lobe: int, strokes: list[np.ndarray]) -> int:
+        return self._refine("split lobe", lambda p: p.split_lobe(lobe, strokes))
+
+    def commit_refinement(self) -> None:
+        self._submit("commit", lambda p, _: p.refine_commit(),
+                     lambda ids: (self.state.say(f"stored {', '.join(ids)}"), self.refresh_library()))

@@ -1,0 +1,43 @@
+"""Refinement panel: the draft's lobes, the selection, and the refinement operations (VRTree 3.3)."""
+
+from __future__ import annotations
+
+from arboretum_client.tools.state import ClientState
+
+from .widgets import DIM, LINE_H, TEXT, Canvas
+
+WIDTH = 250
+
+
+def draw(c: Canvas, s: ClientState) -> None:
+    x0, y0 = 10, 10
+    y = c.panel((x0, y0, x0 + WIDTH, y0 + 330), "Refinement")
+    hbl = s.draft
+    if hbl is None:
+        c.text((x0 + 8, y), "no draft: open a scan", DIM)
+        y += LINE_H
+    else:
+        c.text((x0 + 8, y), f"{len(hbl.branches)} branches, {len(hbl.lobes)} lobes", TEXT)
+        y += LINE_H
+        c.text((x0 + 8, y), f"selected: {', '.join(s.selection) or '-'}"[:40], DIM)
+        y += LINE_H
+        c.text((x0 + 8, y), f"points selected: {len(s.point_selection)}", DIM)
+        y += LINE_H
+        c.text((x0 + 8, y), f"strokes: {len(s.strokes)}", DIM)
+        y += LINE_H + 6
+    rows = [
+        [("remove lobe", "menu", False), ("insert / split / merge", "touchpad", False)],
+        [("hide points" if s.show_points else "show points", "toggle:show_points", not s.show_points)],
+        [("show all" if s.show_all else f"show one ({s.focus})", "toggle:show_all", not s.show_all),
+         ("next", "focus:+", False)],
+        [("undo", "undo", False), ("redo", "redo", False)],
+        [("commit to library", "commit", False)],
+        [("modeling", "mode", False)],
+    ]
+    for row in rows:
+        x = x0 + 8
+        for label, action, on in row:
+            w = 10 + 7 * len(label)
+            c.button((x, y, x + w, y + LINE_H), label, action, on)
+            x += w + 4
+        y += LINE_H + 4
