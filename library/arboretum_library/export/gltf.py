@@ -48,7 +48,7 @@ class _Builder:
         self.doc["bufferViews"].append(view)
         return len(self.doc["bufferViews"]) - 1
 
-    def accessor(self, arr: np.ndarray, kind: str, target: int, minmax: bool = False) -> int:
+    def accessor(self, arr: np.ndarray, kind: str, target: int | None, minmax: bool = False) -> int:
         if arr.dtype == np.float32:
             ctype = FLOAT
         elif arr.dtype == np.uint16:
@@ -135,6 +135,11 @@ def glb_bytes(meshes: Sequence[MeshPart], materials: Sequence[Material],
             entry["matrix"] = node_matrix_yup(node.T_world_node)
         b.doc["nodes"].append(entry)
         b.doc["scenes"][0]["nodes"].append(len(b.doc["nodes"]) - 1)
+    return pack_glb(b)
+
+
+def pack_glb(b: _Builder) -> bytes:
+    """The GLB bytes of a finished builder (empty lists dropped, chunks padded to 4 bytes)."""
     while len(b.blob) % 4:
         b.blob.append(0)
     if b.blob:

@@ -1,0 +1,186 @@
+"""``arboretum modules``: a modular tree in a crown (or converted from a grown tree) as instanced files.
+
+    arboretum modules --crown crown.obj --out tree.glb           # grow in a closed mesh
+    arboretum modules --assembly hbl.npz --out tree.usdc         # crown = union of the lobe hulls
+    arboretum modules --tree hbl.npz --types 16 --out tree.glb   # grow twigs, cut into 16 module types
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from arboretum_library.cli import add_json_flag, emit
+from arboretum_library.errors import InputError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "modules", help="build a modular tree and export it instanced (glTF, USD)",
+        description="Grow a controllable modular tree (Takikawa et al. 2025) in a crown mesh or in an HBL's "
+        "lobes, or convert a grown tree into K module types, and write it instanced: .glb with "
+        "EXT_mesh_gpu_instancing (or plain nodes), .usdc/.usda with a UsdGeom.PointInstancer.",
+    )
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--crown", metavar="MESH", help="closed crown mesh (.obj, .ply, .glb, .gltf; Z up, metres)")
+    src.add_argument("--assembly", metavar="A", help="record .npz (HBL, or Assembly with --library): the "
+                     "union of its lobe hulls is the crown, its main branch base the trunk position")
+    src.add_argument("--tree", metavar="TREE", help="record .npz (HBL, or Assembly with --library): grown "
+                     "with default options, then converted into --types module types")
+    p.add_argument("--modules", metavar="DIR", default=None,
+                   help="module folder (.obj/.glb; default assets/modules/default)")
+    p.add_argument("--library", metavar="LIB", default=None, help="example library for an Assembly record")
+    p.add_argument("--out", required=True, help="file to write: .glb, .usdc or .usda")
+    p.add_argument("--plain-nodes", action="store_true",
+                   help="glTF: one plain node per instance instead of EXT_mesh_gpu_instancing")
+    p.add_argument("--types", type=int, default=None, metavar="K",
+                   help="module types: clusters for --tree (default 16); first K branch modules otherwise")
+    p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same file)")
+    add_json_flag(p)
+    p.set_defaults(func=run)
+
+
+def load_structure(path: str, library: str | None):
+    """An HBL from a record .npz holding an HBL, or an Assembly resolved against ``library``."""
+    from arboretum_library.codec import load_record, record_kind
+    from arboretum_library.model import HBL, Assembly
+
+    kind = record_kind(path)
+    if kind == "HBL":
+        return load_record(path, HBL)
+    if kind != "Assembly":
+        raise InputError(f"{path}: holds a {kind!r} record; expected an HBL or an Assembly")
+    if library is None:
+        raise InputError(f"{path}: an Assembly record needs --library LIB (the examples it places)")
+    from arboretum_library.store import Library
+    from arboretum_server.assembly.world import assembly_to_hbl
+
+    lib = Library.open(library, readonly=True)
+    try:
+        return assembly_to_hbl(load_record(path, Assembly), lib.get)
+    finally:
+        close = getattr(lib, "close", None)
+        if close is not None:
+            close()
+
+
+def _crown_mesh(path: str):
+    import numpy as np
+
+    from .meshio import load_mesh
+
+    p = Path(path)
+    if p.suffix.lower() != ".ply":
+        return load_mesh(p)
+    if not p.is_file():
+        raise InputError(f"--crown {p}: file not found")
+    import trimesh
+
+    try:
+        mesh = trimesh.load(p, force="mesh", process=True)
+    except Exception as exc:  # trimesh raises many types on malformed files
+        raise InputError(f"--crown {p}: cannot be read ({exc})") from exc
+    return np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int32)
+
+
+def run(args: argparse.Namespace) -> int:
+    import time
+
+    from .export import check_format, flat_size, write_instances
+    from .report import describe, size_report
+
+    out = Path(args.out)
+    suffix = check_format(out, args.plain_nodes)
+    if args.types is not None and args.types < 1:
+        raise InputError("--types must be >= 1")
+    t0 = time.perf_counter()
+    if args.tree:
+        inst, extra = _converted(args)
+    else:
+        inst, extra = _grown(args)
+    t1 = time.perf_counter()
+    size = write_instances(out, inst, args.plain_nodes)
+    data = {"out": str(out), "seed": args.seed, "plain_nodes": bool(args.plain_nodes),
+            **size_report(inst, size, flat_size(inst, suffix)), **extra,
+            "timing_s": {"build": t1 - t0, "write": time.perf_counter() - t1}}
+    emit(args, data, describe(data))
+    return 0
+
+
+def _converted(args: argparse.Namespace):
+    import numpy as np
+
+    from arboretum_library.progress import StatusLine, no_progress
+    from arboretum_server.grow.options import GrowOptions
+    from arboretum_server.grow.tree import grow_tree
+
+    from .convert import ConvertOptions, convert_tree
+    from .export import from_converted
+
+    hbl = load_structure(args.tree, args.library)
+    rng = np.random.default_rng(args.seed)
+    tree = grow_tree(hbl, GrowOptions(), rng, no_progress if args.json else StatusLine())
+    conv = convert_tree(tree, ConvertOptions(types=args.types or 16), rng)
+    return from_converted(conv), {
+        "source": "tree", "nodes": int(len(tree.positions)), "height": conv.height,
+        "chamfer": conv.chamfer, "chamfer_fraction": conv.chamfer_fraction,
+    }
+
+
+def _grown(args: argparse.Namespace):
+    import numpy as np
+
+    from .crown import crown_from_meshes
+    from .export import from_modular_tree
+    from .grow import grow_modular_tree
+    from .options import ModularTreeOptions
+    from .report import constraint_report
+
+    modules = _module_set(args.modules, args.types)
+    if args.crown:
+        meshes = [_crown_mesh(args.crown)]
+        lo = meshes[0][0].min(axis=0)
+        root = np.r_[(lo + meshes[0][0].max(axis=0))[:2] / 2, min(lo[2], 0.0)]
+    else:
+        hbl = load_structure(args.assembly, args.library)
+        if not hbl.lobes:
+            raise InputError(f"--assembly {args.assembly}: has no lobes (no crown to grow in)")
+        meshes = [(lb.hull_vertices, lb.hull_faces) for lb in hbl.lobes]
+        root = np.asarray(hbl.branches[0].points[0], np.float64)
+    crown = crown_from_meshes(meshes)
+    T0 = trunk_transform(modules, crown, root)
+    tree = grow_modular_tree(modules, crown, ModularTreeOptions(), np.random.default_rng(args.seed),
+                             T_world_trunk=T0)
+    return from_modular_tree(tree, modules), {
+        "source": "crown" if args.crown else "assembly", "constraints": constraint_report(tree)}
+
+
+def _module_set(folder: str | None, types: int | None):
+    from arboretum_library.assets import asset_path
+
+    from .moduleset import load_module_set
+
+    path = Path(folder) if folder else asset_path("modules", "default")
+    if not path.is_dir():
+        raise InputError(f"--modules {path}: not a folder")
+    modules = load_module_set(path)
+    if types is None:
+        return modules
+    keep = [m.name for m in modules.modules if m.is_trunk]
+    keep += [m.name for m in modules.modules if not m.is_trunk][:types]
+    return modules.subset(keep)
+
+
+def trunk_transform(modules, crown, root):
+    """(4, 4) trunk placement: base at ``root`` (3,), upright, scaled so its top reaches a third of the
+    way up the crown (scale clamped to 0.5-3)."""
+    import numpy as np
+
+    from arboretum_library.geometry import make_transform
+
+    trunks = modules.trunk_indices
+    trunk = modules.modules[int(trunks[0] if len(trunks) else modules.branch_indices[0])]
+    lo, hi = crown.bounds[0, 2], crown.bounds[1, 2]
+    target = lo + (hi - lo) / 3 - root[2]
+    scale = float(np.clip(target / max(trunk.vertices[:, 2].max(), 1e-9), 0.5, 3.0))
+    return make_transform(None, root, scale)
