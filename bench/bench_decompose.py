@@ -1,0 +1,95 @@
+"""Decomposition speed (issue 4): 12k points < 1 s, 200k points < 3 s end to end, refinement < 100 ms.
+
+Inputs are the toy tree of ``decompose.toytree`` (leaf-on, 50 % leaf points) and the bundled leaf-on
+scan 07; baselines are measured in the same run (numpy FPS loop; shape-context costs pair by pair).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from bench.harness import Row, median_time
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+
+def _decompose_rows() -> list[Row]:
+    from arboretum_library.assets import sample_scans
+    from arboretum_server.decompose.options import DecomposeOptions
+    from arboretum_server.decompose.pipeline import decompose
+    from arboretum_server.decompose.toytree import toy_scan, toy_truth
+
+    truth = toy_truth()
+    rows = []
+    pts12, _ = toy_scan(truth, n=12000, seed=1)
+    last = {}
+
+    def run12():
+        last["d"] = decompose(pts12, DecomposeOptions())
+
+    t = median_time(run12, runs=5)
+    steps = {k: round(v * 1000, 1) for k, v in last["d"].timing.items()}
+    rows.append(Row("decompose 12k points (toy tree, N_m=8, N_l=40)", t, target=1.0, runs=5, extra={"ms": steps}))
+    pts200, _ = toy_scan(truth, n=200_000, seed=2)
+    t = median_time(lambda: decompose(pts200, DecomposeOptions()), runs=3)
+    rows.append(Row("decompose 200k points end to end (toy tree)", t, target=3.0, runs=3))
+    scan = [p for p in sample_scans() if p.name.startswith("07_")]
+    if scan:
+        pts = np.loadtxt(scan[0])
+        t = median_time(lambda: decompose(pts, DecomposeOptions()), runs=3)
+        rows.append(Row("decompose scan 07 (64k -> 12k points)", t, target=1.0, runs=3))
+    return rows
+
+
+def _refine_rows() -> list[Row]:
+    from arboretum_server.decompose import refine
+    from arboretum_server.decompose.options import DecomposeOptions
+    from arboretum_server.decompose.pipeline import decompose
+    from arboretum_server.decompose.toytree import toy_scan, toy_truth
+
+    pts, _ = toy_scan(toy_truth(), n=12000, seed=1)
+    d = decompose(pts, DecomposeOptions())
+    lobe = d.hbl.lobes[4].points
+    ops = {
+        "remove lobe": lambda: refine.remove_lobe(d, 3),
+        "insert lobe": lambda: refine.insert_lobe(d, d.lobes[0].members[: len(d.lobes[0].members) // 2]),
+        "merge lobes": lambda: refine.merge_lobes(d, [1, 2]),
+        "split lobe (2 strokes)": lambda: refine.split_lobe(d, 4, [lobe[:2], lobe[-2:]]),
+    }
+    return [Row(f"refine: {name}", median_time(fn, runs=7), target=0.1, runs=7) for name, fn in ops.items()]
+
+
+def _kernel_rows() -> list[Row]:
+    from arboretum_server.decompose.sampling import farthest_points, farthest_points_reference
+    from arboretum_server.decompose.similarity import assignment_cost, chi_square, shape_contexts
+
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(0, 1, (12000, 3))
+    base = median_time(lambda: farthest_points_reference(pts, 97, 0), runs=3)
+    fast = median_time(lambda: farthest_points(pts, 97, 0), runs=5)
+    rows = [Row("FPS 97 of 12k points (fpsample)", fast, runs=5, baseline="numpy FPS loop", ratio=fast / base)]
+    branches = np.cumsum(rng.normal(0, 0.01, (48, 24, 3)), axis=1)
+
+    def vectorised():
+        h = shape_contexts(branches)
+        return [assignment_cost(h[i], h[j]) for i in range(40) for j in range(40, 48)]
+
+    def naive():
+        out = []
+        for i in range(40):
+            for j in range(40, 48):
+                hi, hj = shape_contexts(branches[i : i + 1])[0], shape_contexts(branches[j : j + 1])[0]
+                c = np.array([[0.5 * np.sum((a - b) ** 2 / np.maximum(a + b, 1e-300)) for b in hj] for a in hi])
+                out.append(c.sum())
+        return out
+
+    assert chi_square(np.eye(3), np.eye(3)).shape == (3, 3)
+    v, n = median_time(vectorised, runs=5), median_time(naive, runs=1, warmup=0)
+    rows.append(Row("shape-context costs, 40 x 8 branch pairs", v, runs=5, baseline="pair-by-pair loops", ratio=v / n))
+    return rows
+
+
+def run() -> list[Row]:
+    return _decompose_rows() + _refine_rows() + _kernel_rows()

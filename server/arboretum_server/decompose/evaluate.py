@@ -1,0 +1,138 @@
+"""Accuracy of a decomposition against ground truth (synthetic trees) or a reference skeleton (QSM).
+
+All distances are in the HBL's output frame; ``to_frame`` maps scan/truth coordinates into it. Figures:
+
+- ``main_fit``: mean distance from points sampled along the N_m longest true branches to the nearest
+  extracted main branch, as a fraction of tree height (target <= 0.02); ``main_fit_worst``: the worst
+  single branch's mean.
+- ``leaf_cover``: fraction of true leaf points inside a lobe hull or within 1 cm (0.8 m scale) of one.
+- ``counts_ok``: N_m main branches and N_l lobes exactly; ``connected``: every branch reaches branch 0
+  through parents and starts on its parent's vertex.
+- ``crossings``: secondary branches with a vertex more than ``CROSS_TOL`` inside a lobe they do not feed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from arboretum_library.model import HBL, Level
+from arboretum_library.truth import TreeTruth, branch_polylines, polyline_length
+
+from .merge import resample_step
+
+COVER_TOL = 0.01
+"""Leaf cover tolerance at the 0.8 m scale."""
+CROSS_TOL = 0.002
+"""How deep (0.8 m scale) a secondary branch may enter a foreign lobe before it counts as crossing."""
+
+
+@dataclass(frozen=True)
+class Metrics:
+    main_fit: float
+    main_fit_worst: float
+    leaf_cover: float
+    n_main: int
+    n_lobes: int
+    counts_ok: bool
+    connected: bool
+    crossings: int
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def sample_polylines(polylines: list[np.ndarray], step: float) -> np.ndarray:
+    """Points (M, 3) every ~``step`` along each polyline (N_i, 3)."""
+    return np.concatenate([resample_step(p, step) for p in polylines]) if polylines else np.zeros((0, 3))
+
+
+def signed_distances(vertices: np.ndarray, faces: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Signed distance (M,) of ``q`` (M, 3) to the closed mesh; negative inside (open3d ray casting)."""
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(faces.astype(np.uint32)))
+    return scene.compute_signed_distance(o3d.core.Tensor(q.astype(np.float32))).numpy().astype(np.float64)
+
+
+def lobe_distance(hbl: HBL, q: np.ndarray, skip: Callable[[int], bool] = lambda j: False) -> np.ndarray:
+    """Smallest signed distance (M,) from ``q`` to any lobe hull of ``hbl`` (inf where none is near)."""
+    best = np.full(len(q), np.inf)
+    for j, lobe in enumerate(hbl.lobes):
+        if skip(j):
+            continue
+        lo, hi = lobe.hull_vertices.min(axis=0), lobe.hull_vertices.max(axis=0)
+        pad = 0.05 * max(hbl.height, 1e-9)
+        near = np.flatnonzero(((q > lo - pad) & (q < hi + pad)).all(axis=1))
+        if len(near):
+            best[near] = np.minimum(best[near], signed_distances(lobe.hull_vertices, lobe.hull_faces, q[near]))
+    return best
+
+
+def main_fit(hbl: HBL, true_branches: list[np.ndarray]) -> tuple[float, float]:
+    """(mean, worst-branch mean) distance from ``true_branches`` to the MAIN branches / tree height."""
+    h = max(hbl.height, 1e-12)
+    mains = [hbl.branches[i].points for i in hbl.by_level(Level.MAIN)]
+    tree = cKDTree(sample_polylines(mains, h / 500))
+    per = [tree.query(resample_step(b, h / 500))[0] for b in true_branches]
+    if not per:
+        return 0.0, 0.0
+    return float(np.concatenate(per).mean() / h), float(max(p.mean() for p in per) / h)
+
+
+def connected(hbl: HBL) -> bool:
+    """True if every branch reaches branch 0 and starts at its parent's ``parent_vertex``."""
+    for b in hbl.branches[1:]:
+        if b.parent < 0:
+            return False
+        if np.linalg.norm(b.points[0] - hbl.branches[b.parent].points[b.parent_vertex]) > 1e-6:
+            return False
+    return len(hbl.branches) > 0 and hbl.branches[0].parent == -1
+
+
+def crossings(hbl: HBL) -> int:
+    """Secondary branches with a vertex more than CROSS_TOL (0.8 m scale) inside a lobe they do not feed."""
+    tol = CROSS_TOL * hbl.height / 0.8
+    feeds = {lb.branch: j for j, lb in enumerate(hbl.lobes)}
+    bad = 0
+    for i in hbl.by_level(Level.SECONDARY):
+        own = feeds.get(i, -1)
+        pts = resample_step(hbl.branches[i].points, tol)
+        if (lobe_distance(hbl, pts, lambda j, own=own: j == own) < -tol).any():
+            bad += 1
+    return bad
+
+
+def evaluate(hbl: HBL, truth: TreeTruth, leaf_points: np.ndarray, to_frame: Callable[[np.ndarray], np.ndarray],
+             n_main: int, n_lobes: int) -> Metrics:
+    """Metrics of ``hbl`` against ``truth``; ``leaf_points`` (L, 3) and the truth are in the scan frame."""
+    polys = branch_polylines(truth)
+    lengths = np.array([polyline_length(truth, p) for p in polys])
+    longest = [to_frame(truth.positions[polys[i]]) for i in np.argsort(-lengths)[:n_main]]
+    fit, worst = main_fit(hbl, longest)
+    tol = COVER_TOL * hbl.height / 0.8
+    leaves = to_frame(np.asarray(leaf_points, dtype=np.float64).reshape(-1, 3))
+    cover = float((lobe_distance(hbl, leaves) <= tol).mean()) if len(leaves) else 1.0
+    nm, nl = len(hbl.by_level(Level.MAIN)), len(hbl.lobes)
+    return Metrics(fit, worst, cover, nm, nl, nm == n_main and nl == n_lobes, connected(hbl), crossings(hbl))
+
+
+def reference_fit(hbl: HBL, starts: np.ndarray, ends: np.ndarray) -> dict[str, float]:
+    """skeleton_fit-style figures of the HBL's branches against reference segments (in the HBL frame)."""
+    h = max(hbl.height, 1e-12)
+    ref = sample_polylines([np.stack([a, b]) for a, b in zip(starts, ends)], h / 500)
+    mains = [hbl.branches[i].points for i in hbl.by_level(Level.MAIN)]
+    cand_main = sample_polylines(mains, h / 500)
+    cand_all = sample_polylines([b.points for b in hbl.branches], h / 500)
+    d_main = cKDTree(cand_main).query(ref)[0]
+    d_all = cKDTree(cand_all).query(ref)[0]
+    return {
+        "ref_to_main": float(d_main.mean() / h),
+        "ref_to_all": float(d_all.mean() / h),
+        "main_to_ref": float(cKDTree(ref).query(cand_main)[0].mean() / h),
+        "ref_covered_all": float((d_all < 0.02 * h).mean()),
+    }

@@ -1,0 +1,136 @@
+"""The kNN graph of VRTree section 3.4: K neighbours within a query radius, Euclidean weights, bridged.
+
+A K = 5 graph of a real tree falls apart into components (FACTS.md); we add, for every component that
+cannot reach the root, the shortest edges that join the components into one (a minimum spanning tree
+over components), and report how many we added. Shortest paths from the root use Dijkstra.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix, csr_matrix
+from scipy.sparse.csgraph import connected_components, dijkstra, minimum_spanning_tree
+from scipy.spatial import cKDTree
+
+CANDIDATES = 16
+"""Neighbours queried per point for bridging candidates (beyond the K graph neighbours)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Graph:
+    """A connected, symmetric, Euclidean-weighted kNN graph over a cloud."""
+
+    adjacency: csr_matrix
+    """(N, N) symmetric CSR, weights = edge lengths."""
+    components: int
+    """Connected components before bridging."""
+    bridges: int
+    """Edges added to join them."""
+    neighbours: np.ndarray
+    """(N, k) int64: each point's nearest neighbours (itself excluded), for local features."""
+
+
+def _edges(a: np.ndarray, b: np.ndarray, w: np.ndarray, n: int) -> csr_matrix:
+    m = coo_matrix((np.r_[w, w], (np.r_[a, b], np.r_[b, a])), shape=(n, n)).tocsr()
+    m.sum_duplicates()
+    return m
+
+
+def knn_graph(points: np.ndarray, k: int, radius: float) -> Graph:
+    """Graph of ``points`` (N, 3): each point to its ``k`` nearest within ``radius``, then bridged."""
+    n = len(points)
+    tree = cKDTree(points)
+    kq = min(n, max(k, CANDIDATES) + 1)
+    dist, nb = tree.query(points, k=kq)
+    rows = np.repeat(np.arange(n), k)
+    d, c = dist[:, 1 : k + 1].ravel(), nb[:, 1 : k + 1].ravel()
+    ok = d <= radius
+    adj = _edges(rows[ok], c[ok], np.maximum(d[ok], 1e-12), n)
+    ncomp, lab = connected_components(adj, directed=False)
+    if ncomp == 1:
+        return Graph(adj, 1, 0, nb[:, 1:])
+    a, b, w = _bridges(points, tree, lab, ncomp, dist[:, 1:], nb[:, 1:])
+    adj = (adj + _edges(a, b, np.maximum(w, 1e-12), n)).tocsr()
+    return Graph(adj, ncomp, len(a), nb[:, 1:])
+
+
+def _bridges(points, tree, lab, ncomp, dist, nb):
+    """Shortest edges (a, b, w) that join ``ncomp`` components labelled ``lab`` into one."""
+    a_all, b_all, w_all = [], [], []
+    while True:
+        # candidate inter-component edges from the neighbour lists
+        src = np.repeat(np.arange(len(points)), nb.shape[1])
+        dst, w = nb.ravel(), dist.ravel()
+        cross = lab[src] != lab[dst]
+        ca, cb, cw = src[cross], dst[cross], w[cross]
+        ca, cb, cw = _isolated_edges(points, tree, lab, ncomp, ca, cb, cw)
+        # minimum spanning tree over components using the shortest edge per component pair
+        la, lb = lab[ca], lab[cb]
+        order = np.lexsort((cw, np.minimum(la, lb), np.maximum(la, lb)))
+        key = np.minimum(la, lb)[order] * ncomp + np.maximum(la, lb)[order]
+        first = order[np.r_[True, key[1:] != key[:-1]]]
+        comp = coo_matrix((cw[first] + 1e-12, (la[first], lb[first])), shape=(ncomp, ncomp))
+        mst = minimum_spanning_tree(comp).tocoo()
+        pick = {(min(i, j), max(i, j)) for i, j in zip(mst.row, mst.col)}
+        sel = [e for e in first if (min(lab[ca[e]], lab[cb[e]]), max(lab[ca[e]], lab[cb[e]])) in pick]
+        a_all.append(ca[sel])
+        b_all.append(cb[sel])
+        w_all.append(cw[sel])
+        merged = coo_matrix((np.ones(len(sel)), (lab[ca[sel]], lab[cb[sel]])), shape=(ncomp, ncomp))
+        n2, clab = connected_components(merged, directed=False)
+        if n2 == 1:
+            return np.concatenate(a_all), np.concatenate(b_all), np.concatenate(w_all)
+        lab, ncomp = clab[lab], n2
+
+
+def _isolated_edges(points, tree, lab, ncomp, ca, cb, cw):
+    """Add, for each component with no candidate edge, its shortest edge to any other component."""
+    has = np.zeros(ncomp, bool)
+    has[lab[ca]] = True
+    has[lab[cb]] = True
+    extra_a, extra_b, extra_w = [ca], [cb], [cw]
+    for c in np.flatnonzero(~has):
+        a, b, w = _nearest_pair(points, tree, np.flatnonzero(lab == c), np.flatnonzero(lab != c))
+        extra_a.append(a)
+        extra_b.append(b)
+        extra_w.append(w)
+    return np.concatenate(extra_a), np.concatenate(extra_b), np.concatenate(extra_w)
+
+
+def _nearest_pair(points, tree, inside, outside):
+    """The shortest edge (a, b, w) (arrays of one) between index sets ``inside`` and ``outside``."""
+    if len(inside) <= 4 * CANDIDATES:  # a small component: its nearest outsider is among few neighbours
+        d, j = tree.query(points[inside], k=min(len(points), len(inside) + 1))
+        d = np.where(np.isin(j, inside), np.inf, d)
+        r, k = np.unravel_index(int(np.argmin(d)), d.shape)
+        return inside[r : r + 1], j[r, k : k + 1], d[r, k : k + 1]
+    small, big = (inside, outside) if len(inside) <= len(outside) else (outside, inside)
+    d, j = cKDTree(points[big]).query(points[small])
+    r = int(np.argmin(d))
+    return small[r : r + 1], big[j[r : r + 1]], d[r : r + 1]
+
+
+def shortest_paths(adj: csr_matrix, root: int) -> tuple[np.ndarray, np.ndarray]:
+    """Geodesic distance (N,) and predecessor (N,) int32 (-1 at the root) from node ``root``."""
+    dist, pred = dijkstra(adj, directed=False, indices=root, return_predecessors=True)
+    pred = pred.astype(np.int32)
+    pred[pred < 0] = -1
+    return dist, pred
+
+
+def path_to(pred: np.ndarray, node: int) -> np.ndarray:
+    """Node indices (M,) from the root to ``node`` along the predecessor tree ``pred``."""
+    out = [node]
+    p = pred.tolist()
+    while p[out[-1]] >= 0:
+        out.append(p[out[-1]])
+    return np.asarray(out[::-1], dtype=np.int64)
+
+
+def weighted(adj: csr_matrix, node_weight: np.ndarray) -> csr_matrix:
+    """A copy of ``adj`` whose edge weights are scaled by the larger node weight of their two ends."""
+    coo = adj.tocoo()
+    w = coo.data * np.maximum(node_weight[coo.row], node_weight[coo.col])
+    return csr_matrix((w, (coo.row, coo.col)), shape=adj.shape)

@@ -1,0 +1,47 @@
+"""A voxel grid answering "how many points, and what centroid, in the 3x3x3 cells around q" in bulk.
+
+Ball queries of a k-d tree return Python lists, which dominates the cost for thousands of queries in
+dense trunks; a sorted-key voxel grid answers the same box queries with 27 vectorised searchsorted calls.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+_OFFSETS = np.array(np.meshgrid([-1, 0, 1], [-1, 0, 1], [-1, 0, 1], indexing="ij")).reshape(3, -1).T
+_BIG = np.int64(1) << 20
+
+
+def _keys(cells: np.ndarray) -> np.ndarray:
+    c = cells + (_BIG >> 1)
+    return (c[..., 0] * _BIG + c[..., 1]) * _BIG + c[..., 2]
+
+
+class BoxGrid:
+    """Counts and sums of ``points`` (N, 3) per cubic cell of side ``cell``."""
+
+    def __init__(self, points: np.ndarray, cell: float) -> None:
+        self.cell = float(cell)
+        self.origin = points.min(axis=0)
+        keys = _keys(np.floor((points - self.origin) / self.cell).astype(np.int64))
+        self.keys, inv, self.counts = np.unique(keys, return_inverse=True, return_counts=True)
+        self.sums = np.zeros((len(self.keys), 3))
+        np.add.at(self.sums, inv.ravel(), points)
+
+    def query(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(counts (M,), sums (M, 3)) of the points in the 27 cells around each of ``q`` (M, 3)."""
+        base = np.floor((q - self.origin) / self.cell).astype(np.int64)
+        count = np.zeros(len(q))
+        total = np.zeros((len(q), 3))
+        for off in _OFFSETS:
+            k = _keys(base + off)
+            i = np.clip(np.searchsorted(self.keys, k), 0, len(self.keys) - 1)
+            hit = self.keys[i] == k
+            count[hit] += self.counts[i[hit]]
+            total[hit] += self.sums[i[hit]]
+        return count, total
+
+    def centroids(self, q: np.ndarray) -> np.ndarray:
+        """(M, 3) centroid of the points around each ``q`` (``q`` itself where there are none)."""
+        n, s = self.query(q)
+        return np.where(n[:, None] > 0, s / np.maximum(n, 1)[:, None], q)

@@ -1,0 +1,190 @@
+"""Algorithm 1 of VRTree (branch merge) and the connection-point smoothing of Eq. (1).
+
+Branches start as shortest paths from the root. We resample each at a fixed arc-length ``step`` and
+centre it in the cloud (each vertex moved to the centroid of the points around it), so paths that run up
+opposite sides of a thick trunk coincide. Merging a path P_i into the most similar kept branch P_opt
+walks both from the root: leading vertices of P_i closer than the threshold to P_opt are merged; the
+first one that is not is the connection point v_j, joined to its counterpart v_i on P_opt by a new edge,
+then moved by Eq. (1): v_j' = (v_i l_i + v_{j+1} l_{j+1}) / (l_i + l_{j+1}).
+
+"Most similar" is the lowest shape-context assignment cost (similarity.py) among the kept branches that
+share the longest merged prefix with P_i (within one threshold): on a shortest-path tree every path
+shares an exact prefix with some kept branch, and merging into a branch with a shorter shared prefix
+would duplicate wood that is already there.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from arboretum_library.geometry import polyline_lengths
+
+from .grid import BoxGrid
+from .similarity import assignment_cost, resample_all, shape_contexts
+
+
+def resample_step(points: np.ndarray, step: float) -> np.ndarray:
+    """``points`` (N, 3) resampled at arc-length spacing ~``step`` (M >= 2 vertices, ends kept)."""
+    s = polyline_lengths(points)
+    n = max(2, int(np.ceil(s[-1] / step)) + 1)
+    t = np.linspace(0.0, s[-1], n)
+    return np.stack([np.interp(t, s, points[:, k]) for k in range(3)], axis=1)
+
+
+def centre_paths(paths: list[np.ndarray], grid: BoxGrid) -> list[np.ndarray]:
+    """Each vertex of each path moved to the centroid of the cloud around it in ``grid`` (root kept)."""
+    if not paths:
+        return []
+    out = grid.centroids(np.concatenate(paths))
+    pieces = np.split(out, np.cumsum([len(p) for p in paths])[:-1])
+    for p, q in zip(paths, pieces):
+        q[0] = p[0]
+    return pieces
+
+
+def merged_prefix(cands: list[np.ndarray], ref: np.ndarray, tau: float) -> np.ndarray:
+    """For each candidate polyline, the index of its first vertex farther than ``tau`` from ``ref``."""
+    tree = cKDTree(ref)
+    lens = np.array([len(c) for c in cands])
+    d, _ = tree.query(np.concatenate(cands))
+    far = np.split(d >= tau, np.cumsum(lens)[:-1])
+    return np.array([int(np.argmax(f)) if f.any() else len(f) for f in far])
+
+
+WANDER = 1.3
+"""Largest ratio of arc length to straight reach that counts toward a candidate's novelty."""
+
+
+@dataclass
+class BranchSet:
+    """Branches built by Algorithm 1 (mutable while building; copied by the refinement operations)."""
+
+    segments: list[np.ndarray] = field(default_factory=list)
+    """Stored polylines (L, 3): from the connection point on the parent to the tip."""
+    parents: list[int] = field(default_factory=list)
+    parent_vertex: list[int] = field(default_factory=list)
+    full: list[np.ndarray] = field(default_factory=list)
+    """Full polylines from the root (L, 3), used for similarity and merging."""
+    owner: list[np.ndarray] = field(default_factory=list)
+    """(L, 2) int: (segment, vertex) owning each vertex of ``full``."""
+
+
+def eq1(v_i: np.ndarray, v_j: np.ndarray, v_next: np.ndarray) -> np.ndarray:
+    """Eq. (1): the connection point v_j moved to (v_i l_i + v_{j+1} l_{j+1}) / (l_i + l_{j+1})."""
+    l_i, l_n = np.linalg.norm(v_i - v_j), np.linalg.norm(v_next - v_j)
+    if l_i + l_n <= 1e-12:
+        return v_j
+    return (v_i * l_i + v_next * l_n) / (l_i + l_n)
+
+
+def choose_parent(ks: np.ndarray, hist: np.ndarray, ref_hists: np.ndarray) -> int:
+    """Index of P_opt: among the kept branches whose merged prefixes ``ks`` (M,) are within one vertex of
+    the longest, the one with the lowest shape-context assignment cost (``hist`` (n, k) against
+    ``ref_hists`` (M, n, k))."""
+    close = np.flatnonzero(ks >= ks.max() - 1)
+    if len(close) == 1:
+        return int(close[0])
+    costs = [assignment_cost(hist, ref_hists[c]) for c in close]
+    return int(close[int(np.argmin(costs))])
+
+
+def attach(path: np.ndarray, kept: BranchSet, opt: int, k: int, tree: cKDTree | None = None) -> tuple[np.ndarray, int, int]:
+    """Merge ``path`` into ``kept.full[opt]`` after ``k`` merged vertices.
+
+    Returns the new segment (first vertex = v_i on the parent), the parent segment and its vertex.
+    """
+    k = int(np.clip(k, 1, len(path)))
+    ref = kept.full[opt]
+    i_ref = int((tree or cKDTree(ref)).query(path[k - 1])[1])
+    v_i = ref[i_ref]
+    seg, pv = (int(x) for x in kept.owner[opt][i_ref])
+    tail = path[k:]
+    if len(tail) == 0:
+        tail = path[-1:]
+    tail = tail.copy()
+    if len(tail) >= 2:
+        tail[0] = eq1(v_i, tail[0], tail[1])
+    if np.linalg.norm(tail[0] - v_i) < 1e-9:
+        tail = tail[1:] if len(tail) > 1 else tail + 1e-6
+    return np.vstack([v_i, tail]), seg, pv
+
+
+def add_branch(kept: BranchSet, segment: np.ndarray, parent: int, pv: int) -> None:
+    """Append ``segment`` (attached at vertex ``pv`` of segment ``parent``, -1 for the root branch)."""
+    b = len(kept.segments)
+    own = np.stack([np.full(len(segment), b), np.arange(len(segment))], axis=1)
+    if parent < 0:
+        full, owner = segment, own
+    else:
+        anc = parent  # a segment's full path holds its own vertices and its ancestors'
+        cut = int(np.flatnonzero((kept.owner[anc][:, 0] == parent) & (kept.owner[anc][:, 1] == pv))[0])
+        full = np.vstack([kept.full[anc][: cut + 1], segment[1:]])
+        owner = np.vstack([kept.owner[anc][: cut + 1], own[1:]])
+    kept.segments.append(segment)
+    kept.parents.append(parent)
+    kept.parent_vertex.append(pv)
+    kept.full.append(full)
+    kept.owner.append(owner)
+
+
+def select_mains(paths: list[np.ndarray], n_main: int, tau: float, step: float) -> list[int]:
+    """Indices of ``n_main`` paths: the longest, then each time the one reaching farthest beyond the kept ones.
+
+    "Farthest" is the arc length beyond the last merged vertex, capped at ``WANDER`` times the straight
+    distance from there to the tip, so paths that wander through foliage are not rewarded.
+    """
+    lens = np.array([len(p) for p in paths])
+    tips = np.array([p[-1] for p in paths])
+    chosen = [int(np.argmax(lens))]
+
+    def reach(ref: int) -> np.ndarray:
+        k = np.maximum(merged_prefix(paths, paths[ref], tau), 1)
+        last = np.array([p[min(j, len(p)) - 1] for p, j in zip(paths, k)])
+        straight = np.linalg.norm(tips - last, axis=1)
+        return np.minimum((lens - k) * step, WANDER * straight)
+
+    novelty = reach(chosen[0])
+    while len(chosen) < n_main:
+        novelty[chosen] = -1
+        best = int(np.argmax(novelty))
+        if novelty[best] < 2 * step:
+            break
+        chosen.append(best)
+        novelty = np.minimum(novelty, reach(best))
+    return chosen
+
+
+def _hists(polylines: list[np.ndarray], n: int, bins: tuple[int, int, int]) -> np.ndarray:
+    return shape_contexts(resample_all(polylines, n), bins)
+
+
+def merge_mains(paths: list[np.ndarray], order: list[int], tau: float, n: int,
+                bins: tuple[int, int, int]) -> BranchSet:
+    """Algorithm 1, step 1: main branches from ``paths[order]`` (the first is the longest)."""
+    kept = BranchSet()
+    add_branch(kept, paths[order[0]], -1, -1)
+    hists = _hists([paths[i] for i in order], n, bins)
+    for j, i in enumerate(order[1:], start=1):
+        ks = np.array([merged_prefix([paths[i]], f, tau)[0] for f in kept.full])
+        opt = choose_parent(ks, hists[j], hists[:j])
+        seg, parent, pv = attach(paths[i], kept, opt, int(ks[opt]))
+        add_branch(kept, seg, parent, pv)
+    return kept
+
+
+def merge_secondaries(paths: list[np.ndarray], mains: BranchSet, tau: float, n: int,
+                      bins: tuple[int, int, int]) -> list[tuple[np.ndarray, int, int]]:
+    """Algorithm 1, step 2: (segment, parent main branch, parent vertex) for each secondary path."""
+    if not paths:
+        return []
+    ks = np.stack([merged_prefix(paths, f, tau) for f in mains.full], axis=1)  # (P, M)
+    hp, hm = _hists(paths, n, bins), _hists(mains.full, n, bins)
+    trees = [cKDTree(f) for f in mains.full]
+    out = []
+    for p, path in enumerate(paths):
+        opt = choose_parent(ks[p], hp[p], hm)
+        out.append(attach(path, mains, opt, int(ks[p, opt]), trees[opt]))
+    return out

@@ -1,0 +1,143 @@
+"""``decompose``: a point cloud to a whole-tree HBL (VRTree section 3.4, Fig. 4, Appendix A).
+
+Steps (each timed in ``Decomposition.timing``): prepare (ground, downsample, root, scale) -> separate
+(leaf/wood) -> graph (kNN K=5 within r=0.05, bridged; Dijkstra from the root) -> mains (FPS endpoints,
+shortest paths, Algorithm 1 step 1) -> lobes (k-means into N_l clusters, alpha shapes) -> secondary
+(shortest paths to the lobe centres, Algorithm 1 step 2, Eq. 1) -> hbl (pipe-model radii, records).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from arboretum_library.model import LEAF
+from arboretum_library.progress import ProgressFn, no_progress
+
+from .graph import knn_graph, shortest_paths, weighted
+from .grid import BoxGrid
+from .lobes import kmeans
+from .merge import merge_mains, select_mains
+from .options import DecomposeOptions
+from .preprocess import prepare
+from .radii import trunk_radius
+from .sampling import farthest_points
+from .secondary import branch_paths, make_lobes, zones
+from .separate import separate
+from .state import Decomposition, build_hbl
+
+STEPS = ("prepare", "graph", "separate", "mains", "lobes", "secondary", "hbl")
+CENTRE_RADIUS = 0.02
+"""Radius (0.8 m frame) of the centroid that centres branch vertices in the cloud."""
+CROWN_BASE = 0.04
+"""Points below this height (0.8 m frame, 5 % of the tree) never join the foliage (buttresses, ground)."""
+
+
+class _Clock:
+    def __init__(self, progress: ProgressFn) -> None:
+        self.timing: dict[str, float] = {}
+        self.progress = progress
+        self.t = time.perf_counter()
+
+    def lap(self, name: str) -> None:
+        now = time.perf_counter()
+        self.timing[name] = now - self.t
+        self.t = now
+        self.progress(STEPS.index(name) + 1, len(STEPS), f"decompose: {name}")
+
+
+def main_clearance(mains, pts: np.ndarray, tau: float, tree: cKDTree) -> np.ndarray:
+    """(N,) bool: points off the main branches' wood.
+
+    A point is on a main branch when it lies closer to its nearest main-branch vertex than that
+    vertex's local radius, estimated as 1.3 x the median distance of its 8 nearest cloud points
+    (clipped to [0.004, tau]): thin branches keep the leaves around them, thick trunks keep their bark.
+    """
+    verts = np.concatenate(mains.full)
+    r = np.clip(1.3 * np.median(tree.query(verts, k=8)[0], axis=1), 0.004, tau)
+    d, i = cKDTree(verts).query(pts)
+    return d > r[i]
+
+
+def foliage_points(labels: np.ndarray, pts: np.ndarray, off_main: np.ndarray, o: DecomposeOptions,
+                   grow: bool = True) -> tuple[np.ndarray, str]:
+    """Indices of the points to cluster into lobes and where they came from ('leaf', 'crown', 'all').
+
+    Leaf-on: the leaf points, plus (``grow``, for guessed labels) every point off the main branches
+    above the lowest 5 % of the tree: leaves the heuristic missed, and the twigs among them.
+    Leaf-off trees (fewer than ``leaf_off_fraction`` leaf points) cluster that crown alone.
+    """
+    n_lobes = o.counts()[1]
+    leaf = labels == LEAF
+    crown = off_main & (pts[:, 2] > CROWN_BASE)
+    if leaf.sum() >= max(4 * n_lobes, o.leaf_off_fraction * len(pts)):
+        return np.flatnonzero(leaf | crown if grow else leaf), "leaf"
+    if crown.sum() >= 4 * n_lobes:
+        return np.flatnonzero(crown), "crown"
+    return np.arange(len(pts)), "all"
+
+
+def centre_grid(pts: np.ndarray, r_trunk: float) -> BoxGrid:
+    """The grid whose 3x3x3 boxes (+-max(CENTRE_RADIUS, 1.5 r_trunk)) centre branch vertices."""
+    return BoxGrid(pts, max(CENTRE_RADIUS, 1.5 * r_trunk) / 1.5)
+
+
+def main_branches(pts: np.ndarray, lab: np.ndarray, adjacency, root: int, grid: BoxGrid, tau: float,
+                  o: DecomposeOptions):
+    """Algorithm 1 step 1 on the shortest paths (leaf edges ``leaf_edge_cost`` longer) to FPS endpoints."""
+    adj = adjacency if o.edge_power == 1.0 else adjacency.power(o.edge_power)
+    _, pred = shortest_paths(weighted(adj, np.where(lab == LEAF, o.leaf_edge_cost, 1.0)), root)
+    ends = farthest_points(pts, o.fps_candidates + 1, root)
+    ends = ends[ends != root][: o.fps_candidates]
+    paths = branch_paths([int(e) for e in ends], pred, pts, grid, o.step)
+    order = select_mains(paths, o.counts()[0], tau, o.step)
+    return merge_mains(paths, order, tau, o.resample, o.sc_bins)
+
+
+def decompose(points: np.ndarray, options: DecomposeOptions = DecomposeOptions(),
+              progress: ProgressFn = no_progress, labels: np.ndarray | None = None) -> Decomposition:
+    """Decompose ``points`` (N, 3) (optional ``labels`` (N,) WOOD/LEAF) into a whole-tree HBL.
+
+    Raises ``InputError`` for clouds that hold no usable single tree.
+    """
+    o = options
+    rng = np.random.default_rng(o.seed)
+    clock = _Clock(progress)
+    prep = prepare(points, o, rng, labels)
+    pts = prep.points
+    root = int(np.argmin(np.linalg.norm(pts, axis=1)))
+    clock.lap("prepare")
+    g = knn_graph(pts, o.k, o.query_radius)
+    r_trunk = trunk_radius(pts)
+    tau = max(o.merge_threshold, r_trunk)
+    grid = centre_grid(pts, r_trunk)
+    clock.lap("graph")
+    lab = prep.labels if prep.labels is not None else separate(pts, g.neighbours, o.leaf_dimension)
+    clock.lap("separate")
+    mains = main_branches(pts, lab, g.adjacency, root, grid, tau, o)
+    clock.lap("mains")
+    off_main = main_clearance(mains, pts, tau, cKDTree(pts))
+    fol, source = foliage_points(lab, pts, off_main, o, grow=prep.labels is None)
+    k_lab, centres = kmeans(pts[fol], o.counts()[1], rng)
+    groups = [fol[k_lab == j] for j in range(len(centres))]
+    zone = zones(pts, groups)
+    clock.lap("lobes")
+    lobes, pred2, rerouted = make_lobes(groups, centres, pts, g.adjacency, root, zone, mains, grid, tau, o)
+    clock.lap("secondary")
+    lobe_of = np.full(len(pts), -1, np.int32)
+    lobe_of[fol] = k_lab
+    stats = {
+        "points": len(pts), "leaf_points": int((lab == LEAF).sum()), "ground_removed": prep.ground_removed,
+        "components": g.components, "bridges": g.bridges, "foliage_source": source,
+        "main_branches": len(mains.segments), "lobes": len(lobes), "rerouted": rerouted,
+        "alpha_shapes": sum(lb.alpha for lb in lobes), "hull_fallbacks": sum(not lb.alpha for lb in lobes),
+        "merge_threshold": tau,
+    }
+    d = Decomposition(None, pts, lab, root, pred2, mains, tuple(lobes), lobe_of, r_trunk, o,  # type: ignore[arg-type]
+                      prep.scale, prep.root_scan, prep.source_index, g.adjacency, clock.timing, stats, tau, grid)
+    d = replace(d, hbl=build_hbl(d))
+    clock.lap("hbl")
+    return d

@@ -1,0 +1,111 @@
+"""Interactive refinement of a decomposition (VRTree section 3.4, Fig. 5): remove, insert, merge and
+split lobes. Each is a pure function ``Decomposition -> Decomposition`` that redoes only what it must:
+hulls and secondary branches of the lobes it creates (one Dijkstra on the cached graph, Algorithm 1
+step 2 against the cached main branches), then the radii and records. Point indices refer to
+``Decomposition.points``; strokes are in the HBL's output frame.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from arboretum_library.errors import InputError
+
+from .lobes import kmeans, lobe_hull
+from .secondary import make_lobes, zones
+from .state import Decomposition, LobeState, build_hbl
+
+
+def _lobe_index(d: Decomposition, j: int) -> int:
+    if not 0 <= j < len(d.lobes):
+        raise InputError(f"lobe {j} does not exist (the tree has {len(d.lobes)} lobes)")
+    return j
+
+
+def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], centres: np.ndarray,
+            t0: float, op: str) -> Decomposition:
+    """Route the new lobes over ``groups`` after ``kept`` and rebuild the records."""
+    new: list[LobeState] = []
+    if groups:
+        zone = zones(d.points, [lb.members for lb in kept] + groups)
+        new, _, _ = make_lobes(groups, centres, d.points, d.adjacency, d.root_index, zone, d.mains, d.grid,
+                               d.tau, d.options, tuple(kept))
+    lobes = tuple(kept) + tuple(new)
+    lobe_of = np.full(len(d.points), -1, np.int32)
+    for j, lb in enumerate(lobes):
+        lobe_of[lb.members] = j
+    stats = dict(d.stats, lobes=len(lobes))
+    out = replace(d, lobes=lobes, lobe_of=lobe_of, stats=stats, timing=dict(d.timing, **{op: time.perf_counter() - t0}))
+    return replace(out, hbl=build_hbl(out))
+
+
+def remove_lobe(d: Decomposition, j: int) -> Decomposition:
+    """Delete lobe ``j`` and its secondary branch (for lobes of irregular shape)."""
+    t0 = time.perf_counter()
+    _lobe_index(d, j)
+    return _finish(d, [lb for k, lb in enumerate(d.lobes) if k != j], [], np.zeros((0, 3)), t0, "remove_lobe")
+
+
+def _take(d: Decomposition, lobes: list[LobeState], taken: np.ndarray) -> list[LobeState]:
+    """``lobes`` with the points ``taken`` removed (new hulls for the ones that lost points; empty dropped)."""
+    mask = np.zeros(len(d.points), bool)
+    mask[taken] = True
+    out = []
+    for lb in lobes:
+        keep = lb.members[~mask[lb.members]]
+        if len(keep) == len(lb.members):
+            out.append(lb)
+        elif len(keep):
+            v, f, a = lobe_hull(d.points[keep], d.options.alpha_radius)
+            out.append(replace(lb, members=keep, hull_vertices=v, hull_faces=f, alpha=a))
+    return out
+
+
+def insert_lobe(d: Decomposition, indices: np.ndarray) -> Decomposition:
+    """A new lobe over the selected point ``indices`` (taken from the lobes that held them)."""
+    t0 = time.perf_counter()
+    idx = np.unique(np.asarray(indices, dtype=np.int64).reshape(-1))
+    if len(idx) == 0 or idx.min() < 0 or idx.max() >= len(d.points):
+        raise InputError(f"insert lobe: select 1 or more point indices in 0..{len(d.points) - 1}")
+    kept = _take(d, list(d.lobes), idx)
+    return _finish(d, kept, [idx], d.points[idx].mean(axis=0)[None], t0, "insert_lobe")
+
+
+def merge_lobes(d: Decomposition, which: list[int]) -> Decomposition:
+    """One lobe from the points of the lobes ``which`` (small lobes close together): new alpha shape,
+    new secondary branch through Algorithm 1."""
+    t0 = time.perf_counter()
+    sel = sorted({_lobe_index(d, j) for j in which})
+    if len(sel) < 2:
+        raise InputError("merge lobes: select at least two different lobes")
+    idx = np.concatenate([d.lobes[j].members for j in sel])
+    kept = [lb for k, lb in enumerate(d.lobes) if k not in sel]
+    return _finish(d, kept, [idx], d.points[idx].mean(axis=0)[None], t0, "merge_lobes")
+
+
+def from_output(d: Decomposition, p: np.ndarray) -> np.ndarray:
+    """Output-frame points (..., 3) in the working frame (inverse of ``Decomposition.to_output``)."""
+    p = np.asarray(p, dtype=np.float64)
+    if d.options.height is None:
+        return (p - d.root_scan) * d.scale
+    return p / d.output_scale
+
+
+def split_lobe(d: Decomposition, j: int, strokes: list[np.ndarray], seed: int = 0) -> Decomposition:
+    """Split lobe ``j`` into one lobe per stroke: each stroke's samples (S_k, 3), output frame, seed one
+    k-means centre (their mean)."""
+    t0 = time.perf_counter()
+    lb = d.lobes[_lobe_index(d, j)]
+    if len(strokes) < 2:
+        raise InputError("split lobe: draw at least two strokes (one per new lobe)")
+    if len(strokes) > len(lb.members):
+        raise InputError(f"split lobe: {len(strokes)} strokes for a lobe of {len(lb.members)} points")
+    init = np.stack([from_output(d, np.asarray(s, dtype=np.float64).reshape(-1, 3)).mean(axis=0) for s in strokes])
+    lab, centres = kmeans(d.points[lb.members], len(strokes), np.random.default_rng(seed), init=init)
+    groups = [lb.members[lab == k] for k in range(len(strokes)) if (lab == k).any()]
+    centres = np.array([d.points[g].mean(axis=0) for g in groups])
+    kept = [x for k, x in enumerate(d.lobes) if k != j]
+    return _finish(d, kept, groups, centres, t0, "split_lobe")

@@ -1,0 +1,172 @@
+"""Unit tests of the decomposition's parts: options, graph, FPS, similarity, merge, lobes, radii."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from arboretum_server.decompose.graph import knn_graph, path_to, shortest_paths
+from arboretum_server.decompose.lobes import (
+    alpha_shape,
+    convex_hull,
+    kmeans,
+    lobe_hull,
+    winding_numbers,
+)
+from arboretum_server.decompose.merge import (
+    BranchSet,
+    add_branch,
+    attach,
+    eq1,
+    merged_prefix,
+    resample_step,
+    select_mains,
+)
+from arboretum_server.decompose.options import SPECIES_COUNTS, DecomposeOptions
+from arboretum_server.decompose.radii import pipe_radii
+from arboretum_server.decompose.sampling import farthest_points, farthest_points_reference
+from arboretum_server.decompose.similarity import similarity_costs
+
+
+def test_table2_counts_and_overrides():
+    assert SPECIES_COUNTS == {"apple": (8, 53), "cherry": (10, 35), "eucalyptus": (8, 40),
+                              "ginkgo": (8, 36), "pine": (6, 40), "walnut": (10, 46)}
+    assert DecomposeOptions(species="Pine").counts() == (6, 40)
+    assert DecomposeOptions(species="oak").counts() == (8, 40)
+    assert DecomposeOptions(species="pine", n_main=3, n_lobes=7).counts() == (3, 7)
+    d = DecomposeOptions(species="walnut").as_dict()
+    assert (d["n_main"], d["n_lobes"], d["alpha"], d["k"], d["query_radius"], d["points"]) == (10, 46, 13.0, 5, 0.05, 12000)
+
+
+def _two_clouds(rng):
+    a = rng.normal(0, 0.01, (300, 3))
+    b = rng.normal(0, 0.01, (300, 3)) + [0.3, 0, 0]
+    c = rng.normal(0, 0.01, (200, 3)) + [0, 0.4, 0]
+    return np.concatenate([a, b, c])
+
+
+def test_graph_bridges_components_with_shortest_edges(rng):
+    pts = _two_clouds(rng)
+    g = knn_graph(pts, 5, 0.05)
+    assert g.components == 3 and g.bridges == 2
+    dist, pred = shortest_paths(g.adjacency, 0)
+    assert np.isfinite(dist).all() and (pred >= 0).sum() == len(pts) - 1
+    # the bridge to cloud b is about as long as the gap between the clouds' nearest points
+    far = int(np.argmax(pts[:, 0]))
+    path = path_to(pred, far)
+    assert path[0] == 0 and path[-1] == far
+    steps = np.linalg.norm(np.diff(pts[path], axis=0), axis=1)
+    assert 0.2 < steps.max() < 0.3
+
+
+def test_graph_keeps_k_nearest_within_radius(rng):
+    pts = np.c_[np.linspace(0, 1, 500), rng.uniform(0, 0.01, (500, 2))]
+    g = knn_graph(pts, 5, 0.05)
+    assert g.components == 1 and g.bridges == 0
+    deg = np.diff(g.adjacency.indptr)
+    assert deg.min() >= 5 and g.adjacency.data.max() <= 0.05
+
+
+def test_fps_matches_reference_coverage(rng):
+    pts = rng.uniform(0, 1, (5000, 3))
+    fast = farthest_points(pts, 64, 0)
+    slow = farthest_points_reference(pts, 64, 0)
+    assert len(set(fast.tolist())) == 64 and slow[0] == 0 and len(set(slow.tolist())) == 64
+
+    def cover(idx):
+        return np.min(np.linalg.norm(pts[:, None] - pts[idx][None], axis=2), axis=1).max()
+
+    assert cover(fast) <= 1.15 * cover(slow)
+
+
+def _arc(n=30, bend=1.0, shift=(0, 0, 0)):
+    t = np.linspace(0, 1, n)
+    return np.stack([bend * 0.3 * t**2, np.zeros(n), t], axis=1) + shift
+
+
+def test_shape_context_similarity_orders_branches():
+    straight, curved = _arc(bend=0.0), _arc(bend=2.0)
+    c = similarity_costs(np.stack([straight]), np.stack([straight, curved, straight + [1, 2, 3]]))
+    assert c[0, 0] == pytest.approx(0.0, abs=1e-12)
+    assert c[0, 2] == pytest.approx(0.0, abs=1e-12)  # translation does not change the shape
+    assert c[0, 1] > 0.5
+    sym = similarity_costs(np.stack([curved]), np.stack([straight]))
+    assert sym[0, 0] == pytest.approx(c[0, 1])
+
+
+def test_eq1_moves_connection_point_by_weighted_lengths():
+    vi, vj, vn = np.zeros(3), np.array([1.0, 0, 0]), np.array([1.0, 3.0, 0])
+    # l_i = 1, l_{j+1} = 3: (vi*1 + vn*3) / 4
+    assert np.allclose(eq1(vi, vj, vn), (vi + 3 * vn) / 4)
+
+
+def test_merge_connects_branch_at_divergence():
+    trunk = resample_step(np.array([[0, 0, 0], [0, 0, 1.0]]), 0.01)
+    bent = np.vstack([trunk[:51], trunk[50] + np.outer(np.linspace(0.01, 0.4, 40), [1, 0, 0.2])])
+    kept = BranchSet()
+    add_branch(kept, trunk, -1, -1)
+    k = merged_prefix([bent], trunk, 0.02)[0]
+    assert 50 <= k <= 53
+    seg, parent, pv = attach(bent, kept, 0, k)
+    assert parent == 0 and 49 <= pv <= 53
+    assert np.allclose(seg[0], trunk[pv])
+    add_branch(kept, seg, parent, pv)
+    assert kept.owner[1][pv].tolist() == [0, pv] and kept.owner[1][pv + 1].tolist() == [1, 1]
+    assert np.allclose(kept.full[1][-1], bent[-1])
+
+
+def test_select_mains_prefers_far_reaching_paths():
+    trunk = resample_step(np.array([[0, 0, 0], [0, 0, 1.0]]), 0.01)
+    left = np.vstack([trunk[:40], trunk[39] + np.outer(np.linspace(0.01, 0.5, 50), [-1, 0, 0])])
+    twig = np.vstack([trunk[:80], trunk[79] + np.outer(np.linspace(0.01, 0.05, 5), [0, 1, 0])])
+    order = select_mains([twig, trunk, left], 2, 0.02, 0.01)
+    assert order == [1, 2]
+
+
+def _closed_and_outward(v, f):
+    edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    tri = v[f]
+    vol = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6
+    return bool((counts % 2 == 0).all()), vol
+
+
+def test_alpha_shape_is_closed_outward_and_holds_its_points(rng):
+    pts = rng.normal(0, 0.02, (300, 3))
+    v, f, used_alpha = lobe_hull(pts, 1 / 13)
+    closed, vol = _closed_and_outward(v, f)
+    assert used_alpha and closed and vol > 0
+    inside = winding_numbers(v, f, pts * 0.5)
+    assert (inside > 0.5).mean() > 0.95
+    assert (winding_numbers(v, f, np.array([[1.0, 1, 1]])) < 0.5).all()
+
+
+def test_convex_fallback_for_degenerate_clusters(rng):
+    flat = np.c_[rng.uniform(0, 0.05, (50, 2)), np.zeros(50)]
+    for pts in (flat, flat[:3], flat[:1]):
+        v, f = convex_hull(pts)
+        closed, vol = _closed_and_outward(v, f)
+        assert closed and vol > 0 and len(f) >= 4
+    assert alpha_shape(flat, 1 / 13) is None
+    v, f, used_alpha = lobe_hull(flat, 1 / 13)
+    assert not used_alpha and (winding_numbers(v, f, flat[:10]) > 0.5).all()
+
+
+def test_kmeans_is_deterministic_and_seeded(rng):
+    pts = rng.normal(size=(400, 3))
+    a = kmeans(pts, 5, np.random.default_rng(3))
+    b = kmeans(pts, 5, np.random.default_rng(3))
+    assert np.array_equal(a[0], b[0]) and np.allclose(a[1], b[1])
+    init = np.array([[9.0, 0, 0], [-9.0, 0, 0]])
+    lab, centres = kmeans(np.r_[pts + [10, 0, 0], pts - [10, 0, 0]], 2, np.random.default_rng(0), init=init)
+    assert (lab[:400] == 0).all() and (lab[400:] == 1).all()
+
+
+def test_pipe_radii_positive_and_child_not_thicker():
+    lengths, parents, pvs = [10, 6, 4, 3], [-1, 0, 0, 1], [-1, 4, 8, 2]
+    radii = pipe_radii(lengths, parents, pvs, [0.5, 0.5, 1.0, 1.0], 0.02)
+    assert all((r > 0).all() for r in radii)
+    assert radii[0][0] == pytest.approx(0.02)
+    for b in range(1, 4):
+        assert radii[b][0] <= radii[parents[b]][pvs[b]] + 1e-12
+        assert (np.diff(radii[b]) <= 1e-12).all()
