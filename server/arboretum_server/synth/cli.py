@@ -86,17 +86,12 @@ def grow(model: str, species: str, seed: int, nodes: int | None = None, progress
         opts = preset(species) if nodes is None else preset(species, nodes=nodes)
         kwargs = {} if progress is None else {"progress": progress}
         return grow_guiding(opts, seed, species, **kwargs)
-    try:
-        from . import harmonic
-    except ImportError as exc:
-        raise InputError(f"--model harmonic is not available in this build ({exc})") from None
-    known = getattr(harmonic, "SPECIES", None)
-    if known is None:  # the brief's location; harmonic re-exports it today
-        from .species import SPECIES as known
-    if species not in known:
-        names = ", ".join(sorted(known))
+    from .harmonic import SPECIES, grow_species
+
+    if species not in SPECIES:
+        names = ", ".join(sorted(SPECIES))
         raise InputError(f"--species {species!r}: unknown harmonic species (known: {names})")
-    return harmonic.grow_species(species, seed)
+    return grow_species(species, seed)
 
 
 def run(args: argparse.Namespace) -> int:
