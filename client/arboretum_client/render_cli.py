@@ -2,8 +2,9 @@
 
 INPUT may be a point cloud (.xyz/.txt/.pts/.csv text with x y z first, .las/.laz/.pcd/.npy, a
 face-less .ply; read by ``arboretum_library.pointio``),
-an HBL or Example record (.npz written by ``arboretum_library.codec.save_record``), or a triangle mesh
-(.ply with faces, .obj). Several inputs are drawn together. Rendering is headless (EGL).
+an HBL or Example record (.npz written by ``arboretum_library.codec.save_record``), a triangle mesh
+(.ply with faces, .obj), or a binary glTF (.glb: grown trees, instanced module trees; read by
+``arboretum_library.export.gltf_read``). Several inputs are drawn together. Rendering is headless (EGL).
 """
 
 from __future__ import annotations
@@ -21,8 +22,8 @@ VIEW_CHOICES = ("front", "side", "top", "iso")
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("render", help="render point clouds, HBL records and meshes to a PNG (headless)")
-    p.add_argument("inputs", nargs="+", metavar="INPUT", help="point cloud, HBL/Example .npz, or mesh .ply/.obj")
+    p = subparsers.add_parser("render", help="render point clouds, HBL records, meshes and GLBs to a PNG (headless)")
+    p.add_argument("inputs", nargs="+", metavar="INPUT", help="point cloud, HBL/Example .npz, mesh .ply/.obj, or .glb")
     p.add_argument("--out", required=True, help="PNG file to write")
     p.add_argument("--view", choices=VIEW_CHOICES, default="iso", help="camera direction (default iso)")
     p.add_argument("--size", default="1280x720", help="image size WIDTHxHEIGHT (default 1280x720)")
@@ -65,11 +66,17 @@ def run(args: argparse.Namespace) -> int:
 
 def load_scene(path: Path, style):
     """A Scene for one input file, chosen by its extension (and content for .ply)."""
-    from .scene_build import hbl_scene, mesh_scene, points_scene
+    from .scene_build import glb_scene, hbl_scene, mesh_scene, points_scene
 
     if not path.is_file():
         raise InputError(f"{path}: no such file")
     ext = path.suffix.lower()
+    if ext == ".glb":
+        from arboretum_library.export.gltf_read import read_glb
+
+        return glb_scene(read_glb(path), grid=False)
+    if ext == ".gltf":
+        raise InputError(f"{path}: only binary glTF (.glb) is read; save it as .glb")
     if ext == ".npz":
         return hbl_scene(load_hbl(path), style)
     if ext == ".obj":

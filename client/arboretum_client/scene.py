@@ -172,8 +172,11 @@ def _item_points(item: Any) -> np.ndarray:
         return item.points
     if isinstance(item, Mesh):
         return item.vertices
-    if isinstance(item, InstancedMesh):
-        return item.matrices[:, :3, 3]
+    if isinstance(item, InstancedMesh):  # the mesh's box corners under every instance transform
+        v = item.mesh.vertices
+        lo, hi = v.min(axis=0), v.max(axis=0)
+        corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        return (item.matrices.astype(np.float64) @ corners.T).transpose(0, 2, 1)[..., :3].reshape(-1, 3)
     raise TypeError(f"not a scene item: {type(item).__name__}")
 
 

@@ -1,4 +1,4 @@
-"""Scenes from library records and plain arrays: HBL structures, point clouds, triangle meshes.
+"""Scenes from library records and plain arrays: HBL structures, point clouds, triangle meshes, GLB meshes.
 
 Colours follow the VRTree paper's figures: main branches red, secondary branches black; each lobe is a
 translucent hull in its own colour from ``LOBE_PALETTE`` (cycled); source points by label (wood brown,
@@ -96,6 +96,50 @@ def mesh_scene(vertices: np.ndarray, faces: np.ndarray, color=(0.62, 0.55, 0.45,
     """A Scene of one triangle mesh: vertices (V, 3), faces (F, 3)."""
     item = Mesh(vertices=_f32(vertices), faces=np.asarray(faces, np.int32), color=_f32(color), pick_id=1)
     return _with_grid(Scene(items=(item,), names={1: "mesh"}), grid)
+
+
+def texture_mean_color(image: bytes) -> np.ndarray:
+    """(3,) mean RGB in 0..1 of an embedded PNG/JPEG, weighted by its alpha so cut-out texels do not
+    count; white when pillow cannot decode it (the material's factor alone then gives the colour)."""
+    import io
+
+    from PIL import Image
+
+    try:
+        rgba = np.asarray(Image.open(io.BytesIO(image)).convert("RGBA"), np.float64) / 255.0
+    except (OSError, ValueError):  # pillow's UnidentifiedImageError is an OSError
+        return np.ones(3)
+    alpha = rgba[..., 3:].reshape(-1, 1)
+    return (rgba[..., :3].reshape(-1, 3) * alpha).sum(axis=0) / max(float(alpha.sum()), 1e-9)
+
+
+def glb_items(meshes, first_id: int = 1):
+    """Items and id names for ``GltfMesh`` records (``arboretum_library.export.gltf_read``).
+
+    Each is drawn in its material's colour (baseColorFactor times the texture's mean colour; no
+    texturing). A mesh placed K > 1 times becomes one ``InstancedMesh`` (one draw call); placed once,
+    or translucent (alphaMode BLEND), it is baked into one world-frame ``Mesh``. The renderer draws both
+    faces of every triangle, lit from either side, so double-sided leaf cards need nothing special.
+    """
+    items, names = [], {}
+    for g in (g for g in meshes if len(g.faces)):
+        pid = first_id + len(items)
+        rgb = g.base_color[:3] * (texture_mean_color(g.texture) if g.texture is not None else 1.0)
+        color = _f32((*np.clip(rgb, 0.0, 1.0), g.base_color[3] if g.alpha_mode == "BLEND" else 1.0))
+        if len(g.instances) > 1 and color[3] >= 1.0:
+            items.append(InstancedMesh(Mesh(_f32(g.positions), g.faces, color, pid), _f32(g.instances)))
+        else:
+            verts = np.concatenate([g.positions @ T[:3, :3].T + T[:3, 3] for T in g.instances])
+            faces = (g.faces[None] + len(g.positions) * np.arange(len(g.instances))[:, None, None]).reshape(-1, 3)
+            items.append(Mesh(_f32(verts), faces.astype(np.int32), color, pid))
+        names[pid] = g.name
+    return items, names
+
+
+def glb_scene(meshes, grid: bool = True) -> Scene:
+    """A Scene of the meshes read from a GLB (``gltf_read.read_glb``), with a ground grid when ``grid``."""
+    items, names = glb_items(meshes)
+    return _with_grid(Scene(items=tuple(items), names=names), grid)
 
 
 def _f32(values) -> np.ndarray:
