@@ -70,3 +70,14 @@ def test_missing_or_wrong_file(tmp_path, capsys):
     bad.write_bytes(b"not a zip")
     with pytest.raises(InputError, match="not a readable .npz"):
         load_hbl(bad)
+
+
+def test_branch_radii_flag(tmp_path, hbl_file, capsys):
+    """--branch-radii hbl keeps the HBL's trunk radius; pipe sums every tip up to the root."""
+    trunk = {}
+    for mode in ("hbl", "pipe"):
+        assert main(["grow", str(hbl_file), "--out", str(tmp_path / f"{mode}.ply"), "--branch-radii", mode,
+                     "--json"]) == 0
+        trunk[mode] = json.loads(capsys.readouterr().out)["trunk_radius"]
+    assert trunk["hbl"] == pytest.approx(load_hbl(hbl_file).branches[0].radii[0], rel=1e-12)
+    assert trunk["pipe"] != pytest.approx(trunk["hbl"], rel=1e-3)

@@ -125,3 +125,27 @@ def test_random_trees_give_watertight_tubes(seed, n, sides):
     for c in range(len(chains.starts) - 1):
         manifold, oriented = edge_check(weld(tubes, sides, tubes.faces[tubes.face_chain == c]))
         assert manifold and oriented
+
+
+def test_ring_at_a_right_angle_lies_on_both_cylinders():
+    """Miter: the ring at a 90° turn is where the incoming and outgoing tubes meet (no pinch)."""
+    pts = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0]])
+    r = 0.1
+    tubes = sweep(pts, np.full(3, r), split_chains(np.array([-1, 0, 1]), np.ones(3)), 16)
+    corner = tubes.positions[17:34]
+    assert np.allclose(np.hypot(corner[:, 1], corner[:, 2]), r, atol=1e-12)  # around the x axis
+    assert np.allclose(np.hypot(corner[:, 0] - 1, corner[:, 2]), r, atol=1e-12)  # around x = 1
+    assert np.linalg.norm(corner - pts[1], axis=1).max() == pytest.approx(r * np.sqrt(2))
+    assert np.allclose(np.linalg.norm(tubes.normals, axis=1), 1.0)
+
+
+def test_frames_do_not_twist_at_sharp_zigzag_turns():
+    """A planar zigzag with 150° turns: the frame's binormal stays the plane's normal (one sign)."""
+    n, sides = 12, 8
+    pts = np.c_[np.arange(n) * 0.3, np.where(np.arange(n) % 2, 1.0, 0.0), np.zeros(n)]
+    tubes = sweep(pts, np.full(n, 0.05), split_chains(np.arange(-1, n - 1), np.ones(n)), sides)
+    ring = tubes.positions[: n * (sides + 1)].reshape(n, sides + 1, 3)
+    quarter = ring[:, sides // 4] - pts  # the ring vector at 90°: along the binormal, never stretched
+    assert np.allclose(quarter[:, :2], 0.0, atol=1e-12)
+    assert np.allclose(quarter[:, 2], quarter[0, 2]) and abs(quarter[0, 2]) == pytest.approx(0.05)
+    assert np.isfinite(tubes.positions).all()

@@ -27,6 +27,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="growth radius D in metres (default: 1/6 of the median lobe radius)")
     p.add_argument("--leaf-size", type=float, default=None,
                    help="leaf card length in metres (default: 1.2 x step)")
+    p.add_argument("--branch-radii", choices=("auto", "hbl", "pipe"), default="auto",
+                   help="hbl: keep the HBL's branch radii and fit twigs under them; pipe: pipe model from "
+                        "every tip to the root; auto (default): hbl when the HBL's radii are consistent")
     p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same tree)")
     p.add_argument("--lod", type=int, default=0, help="level of detail: 0 full, 1, 2, ... coarser")
     p.add_argument("--sides", type=int, default=8, help="tube sides at LOD 0 (default 8)")
@@ -68,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     hbl = load_hbl(args.hbl)
     t0 = time.perf_counter()
     opts = GrowOptions(density=args.density, leaf_density=args.leaf_density, step=args.step,
-                       leaf_size=args.leaf_size)
+                       leaf_size=args.leaf_size, branch_radii=args.branch_radii)
     tree = grow_tree(hbl, opts, np.random.default_rng(args.seed), StatusLine())
     t1 = time.perf_counter()
     mesh = tree_mesh(tree, LodOptions(sides=args.sides, level=args.lod))

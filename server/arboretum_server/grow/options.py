@@ -43,7 +43,16 @@ class GrowOptions:
     pipe_exponent: float = 2.0
     """Pipe-model exponent e in r_parent^e = sum r_child^e (da Vinci's rule 2.0; Leonardo 2.0-2.5)."""
     tip_radius: float | None = None
-    """Radius of a twig tip in metres. None: 0.08 × step."""
+    """Radius of a twig tip in metres before its lobe is fitted to its branch (see ``branch_radii``).
+    None: 0.08 × step (ours, paper-free)."""
+    min_twig_radius: float = 0.3
+    """Fitting a lobe's twigs to its branch never thins a twig below this fraction of ``tip_radius``
+    (nor above the branch radius at the bud)."""
+    branch_radii: str = "auto"
+    """"hbl": main and secondary branches keep the HBL's radii and each lobe's twigs are scaled to fit
+    under the branch they grow from; "pipe": the pipe model over the whole tree (twig tips up to the
+    root); "auto": "hbl" when the HBL's radii are consistent (no child thicker than its parent at a
+    joint, not all equal), else "pipe"."""
     leaf_density: float = 1.0
     """Expected leaf cards per twig node near the tips (Poisson)."""
     leaf_size: float | None = None
@@ -65,7 +74,10 @@ class GrowOptions:
         for name, value in positive.items():
             if not value > 0:
                 raise InputError(f"grow option {name}: must be > 0, got {value}")
-        for name in ("alpha", "beta", "leaf_density", "leaf_jitter", "min_spacing", "leaf_tip_depth"):
+        if self.branch_radii not in ("auto", "hbl", "pipe"):
+            raise InputError(f"grow option branch_radii: must be auto, hbl or pipe, got {self.branch_radii!r}")
+        for name in ("alpha", "beta", "leaf_density", "leaf_jitter", "min_spacing", "leaf_tip_depth",
+                     "min_twig_radius"):
             if getattr(self, name) < 0:
                 raise InputError(f"grow option {name}: must be >= 0, got {getattr(self, name)}")
         if any(v < 0 for v in self.lobe_density.values()):

@@ -10,17 +10,16 @@ from arboretum_library.progress import ProgressFn, no_progress
 from .attraction import attraction_points, default_step
 from .leaves import place_leaves
 from .options import GrowOptions
-from .radii import pipe_radii
+from .radii import lobe_twig_radii, pipe_radii
 from .sca import colonize
-from .skeleton import GrownTree, Leaves, branch_graph, buds, join
+from .skeleton import BranchGraph, GrownTree, Leaves, branch_graph, buds, join
 
 
 def grow_tree(hbl: HBL, opts: GrowOptions, rng: np.random.Generator,
               progress: ProgressFn = no_progress) -> GrownTree:
     """Colonize every lobe of ``hbl`` from its bud, then give the whole tree radii and leaves.
 
-    Same ``rng`` state, same tree. Tips of twigs get ``tip_radius``; tips of HBL branches keep
-    their HBL radius; every other radius follows the pipe model.
+    Same ``rng`` state, same tree. Radii follow ``opts.branch_radii`` (see ``_radii``).
     """
     graph = branch_graph(hbl)
     step = opts.step if opts.step is not None else default_step(hbl.lobes)
@@ -35,12 +34,42 @@ def grow_tree(hbl: HBL, opts: GrowOptions, rng: np.random.Generator,
         leaves = place_leaves(positions, parents, lobe, hbl.lobes, att.index, opts, step, rng)
     if lobe is None:
         lobe = np.full(len(positions), -1, np.int64)
-    tip = opts.tip_radius if opts.tip_radius is not None else 0.08 * step
-    tips = np.full(len(positions), tip)
-    tips[: len(graph.radii)] = np.maximum(graph.radii, tip)
-    radii = pipe_radii(parents, tips, opts.pipe_exponent)
+    radii = _radii(hbl, graph, parents, lobe, opts, step)
     progress(1, 1, f"grown {int((lobe >= 0).sum())} twig nodes, {len(leaves.sizes)} leaves")
     return GrownTree(positions, parents, radii, levels, lobe, leaves, float(step), iterations)
+
+
+def _radii(hbl: HBL, graph: BranchGraph, parents: np.ndarray, lobe: np.ndarray, opts: GrowOptions,
+           step: float) -> np.ndarray:
+    """Radii (N,) of the whole tree.
+
+    "hbl" mode: HBL branch vertices keep their radii (the tree's scale, whatever the twig density);
+    each lobe's twigs get pipe-model radii fitted under their bud (``lobe_twig_radii``). "pipe" mode:
+    the pipe model from every tip to the root (twig tips at ``tip_radius``, HBL tips at their radius).
+    """
+    tip = opts.tip_radius if opts.tip_radius is not None else 0.08 * step
+    mode = opts.branch_radii
+    if mode == "auto":
+        mode = "hbl" if hbl_radii_consistent(hbl) else "pipe"
+    if mode == "hbl":
+        return lobe_twig_radii(parents, lobe, graph.radii, tip, opts.min_twig_radius * tip, opts.pipe_exponent)
+    tips = np.full(len(parents), tip)
+    tips[: len(graph.radii)] = np.maximum(graph.radii, tip)
+    return pipe_radii(parents, tips, opts.pipe_exponent)
+
+
+def hbl_radii_consistent(hbl: HBL) -> bool:
+    """True when the HBL's radii can be the tree's scale: not all equal, never growing towards a
+    branch's tip, and no branch thicker at its first vertex than its parent at the joint."""
+    rad = np.concatenate([b.radii for b in hbl.branches])
+    if rad.max() - rad.min() <= 1e-9 * rad.max():
+        return False
+    for b in hbl.branches:
+        if (np.diff(b.radii) > 1e-12 * b.radii[0]).any():
+            return False
+        if b.parent >= 0 and b.radii[0] > hbl.branches[b.parent].radii[b.parent_vertex] * (1 + 1e-9):
+            return False
+    return True
 
 
 def _no_leaves() -> Leaves:

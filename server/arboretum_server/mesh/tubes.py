@@ -2,7 +2,8 @@
 
 Frames travel along each chain by the double-reflection method (Wang et al. 2008), one vectorised step
 per chain position for all chains together. Tangents at inner vertices are central differences, so the
-ring at a bend lies in its bisecting plane (smooth joints). Each chain's tube is closed by a fan cap at
+ring at a bend lies in its bisecting plane, stretched across the bend by the miter factor
+1/cos(turn/2) (at most ``MAX_MITER``) so the tube does not pinch (smooth joints). Each chain's tube is closed by a fan cap at
 each end and is watertight once its seam vertices (u = 0 and u = 1 of a ring) are welded.
 """
 
@@ -35,8 +36,13 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
 
 
-def _tangents(p: np.ndarray, chains: Chains) -> np.ndarray:
-    """(M, 3) unit tangents: central differences inside a chain, one-sided at its ends."""
+MAX_MITER = 2.0
+"""Largest stretch of a ring across a bend (1 / cos of half the turn; reached at a 120° turn)."""
+
+
+def _tangents(p: np.ndarray, chains: Chains) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unit tangents (M, 3): central differences inside a chain, one-sided at its ends; unit bend
+    directions (M, 3) (in the ring's plane, zero where straight) and miter factors (M,) >= 1."""
     m = len(p)
     first = np.zeros(m, bool)
     first[chains.starts[:-1]] = True
@@ -48,7 +54,13 @@ def _tangents(p: np.ndarray, chains: Chains) -> np.ndarray:
     t = out + into
     hairpin = (t * t).sum(1) < 1e-12  # a reversal: fall back to the incoming (or outgoing) direction
     t[hairpin] = np.where((into[hairpin] ** 2).sum(1, keepdims=True) > 0.5, into[hairpin], out[hairpin])
-    return _unit(t)
+    t = _unit(t)
+    bend = out - into
+    bend -= (bend * t).sum(1, keepdims=True) * t
+    straight = (bend * bend).sum(1) < 1e-18
+    bend = np.where(straight[:, None], 0.0, _unit(bend))
+    cos_half = np.where(first | last, 1.0, (t * into).sum(1))
+    return t, bend, 1.0 / np.clip(cos_half, 1.0 / MAX_MITER, 1.0)
 
 
 def _frames(p: np.ndarray, t: np.ndarray, chains: Chains) -> np.ndarray:
@@ -76,13 +88,17 @@ def sweep(positions: np.ndarray, radii: np.ndarray, chains: Chains, sides: int =
     s = int(sides)
     p = positions[chains.nodes]
     r = radii[chains.radius_node]
-    t = _tangents(p, chains)
+    t, bend, miter = _tangents(p, chains)
     nrm = _frames(p, t, chains)
     bin_ = np.cross(t, nrm)
     theta = 2 * np.pi * np.arange(s + 1) / s
     theta[-1] = 0.0  # the seam vertex sits exactly on the first one
-    radial = np.cos(theta)[None, :, None] * nrm[:, None] + np.sin(theta)[None, :, None] * bin_[:, None]
-    ring = p[:, None] + r[:, None, None] * radial
+    circle = np.cos(theta)[None, :, None] * nrm[:, None] + np.sin(theta)[None, :, None] * bin_[:, None]
+    along = (circle * bend[:, None]).sum(-1, keepdims=True) * bend[:, None]  # (M, s+1, 3)
+    # a ring in the bisecting plane is stretched by 1/cos(turn/2) across the bend, so the tube keeps
+    # its radius through the joint instead of pinching; its normals shrink the other way
+    ring = p[:, None] + r[:, None, None] * (circle + (miter[:, None, None] - 1) * along)
+    radial = _unit(circle + (1 / miter[:, None, None] - 1) * along)
     m = len(p)
     seg = np.linalg.norm(np.diff(p, axis=0), axis=1) if m > 1 else np.zeros(0)
     arc = np.r_[0.0, np.cumsum(seg)]
