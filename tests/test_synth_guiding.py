@@ -19,7 +19,7 @@ from arboretum_library.truth import (
     save_truth,
 )
 from arboretum_server.synth.endpoints import Volume
-from arboretum_server.synth.fields import Rotation, field_angles, vectors
+from arboretum_server.synth.fields import Rotation, field_angles, incremental_angles, vectors
 from arboretum_server.synth.guiding import (
     GuidingOptions,
     Iteration,
@@ -28,11 +28,18 @@ from arboretum_server.synth.guiding import (
     grow_paths,
     path_stretch,
 )
-from arboretum_server.synth.paths import CsrGraph, FlatGraph, lazy_dijkstra, lazy_dijkstra_fast
-from arboretum_server.synth.poisson import poisson_disc
+from arboretum_server.synth.kernels import knn, throw_darts
+from arboretum_server.synth.paths import (
+    CsrGraph,
+    FlatGraph,
+    lazy_dijkstra,
+    lazy_search,
+    reference_search,
+)
+from arboretum_server.synth.poisson import first_independent_set, poisson_disc, spacing_for_count
 from arboretum_server.synth.presets import preset
 from arboretum_server.synth.skeleton import matrix_to_wxyz
-from arboretum_server.synth.yao import sector_of, yao_graph
+from arboretum_server.synth.yao import _cell_size, sector_of, yao_graph
 
 TOP = Volume("box", (0.0, 0.0, 4.5), (2.5, 2.5, 1.2))
 
@@ -85,13 +92,19 @@ def test_lazy_dijkstra_matches_scipy_on_a_fixed_field(rng):
         (w.ravel()[keep], (rows[keep], g.neighbours.ravel()[keep])), shape=(1500, 1500)
     )
     ref = dijkstra(mat, indices=0)
-    got = lazy_dijkstra(FlatGraph.of(g), np.array([0]), theta, phi, None, None, 0)
-    assert np.allclose(got.cost[np.isfinite(ref)], ref[np.isfinite(ref)], rtol=1e-9, atol=1e-12)
+    cg = CsrGraph.of(g)
+    for got in (
+        lazy_dijkstra(FlatGraph.of(cg), np.array([0]), theta, phi, None, None, 0),
+        lazy_search(cg, np.array([0]), theta, phi, None, None, 0),
+    ):
+        fin = np.isfinite(ref)
+        assert fin.sum() > 1400 and np.array_equal(got.done, fin)
+        assert np.allclose(got.cost[fin], ref[fin], rtol=1e-9, atol=1e-12)
 
 
 def test_lazy_vectors_follow_eq1():
     g, root, st = _grow_one(0.0, nodes=6000)
-    fg = FlatGraph.of(g)
+    fg = FlatGraph.of(CsrGraph.of(g))
     n = len(g.points)
     a1, a2, h0 = np.radians(12.0), np.radians(-4.0), 3
     res = lazy_dijkstra(
@@ -107,23 +120,142 @@ def test_lazy_vectors_follow_eq1():
     assert res.done.all() and res.theta.max() == pytest.approx(3 * a1, abs=1e-12)
 
 
-@pytest.mark.parametrize("rule", [(6.0, -6.0, 20), (30.0, 0.0, 1), (10.0, 10.0, 0)])
-def test_fixed_point_search_equals_lazy_search(rng, rule):
-    """Two independent implementations of the lazy search agree exactly (multi-source, Eq. 1)."""
-    pts = rng.random((3000, 3)) * [4, 4, 5]
-    g = yao_graph(pts, 14)
-    n = len(pts)
-    sources = np.array([0, 17, 400])
-    theta, phi = np.zeros(n), np.zeros(n)
-    theta[sources], phi[sources] = [0.0, 0.4, 1.2], [0.0, 2.0, -1.0]
-    a1, a2, h0 = np.radians(rule[0]), np.radians(rule[1]), rule[2]
-    near, far = np.full(n, a1), np.full(n, a2)
-    slow = lazy_dijkstra(FlatGraph.of(g), sources, theta, phi, near, far, h0)
-    fast = lazy_dijkstra_fast(CsrGraph.of(g), pts, sources, theta, phi, near, far, h0, max_runs=80)
-    assert fast is not None
+def _same_search(slow, fast) -> None:
+    """The kernel's result is the reference's: identical tree, vectors within 1e-12."""
     assert np.array_equal(slow.parent, fast.parent) and np.array_equal(slow.origin, fast.origin)
-    assert np.array_equal(slow.hops, fast.hops) and np.allclose(slow.theta, fast.theta)
-    assert np.allclose(slow.cost, fast.cost, rtol=1e-12, atol=1e-12)
+    assert np.array_equal(slow.hops, fast.hops) and np.array_equal(slow.done, fast.done)
+    assert np.allclose(slow.theta, fast.theta, rtol=0, atol=1e-12)
+    assert np.allclose(slow.phi, fast.phi, rtol=0, atol=1e-12)
+    fin = slow.done
+    assert np.allclose(slow.cost[fin], fast.cost[fin], rtol=1e-12, atol=1e-12)
+    assert np.isinf(fast.cost[~fin]).all()
+
+
+def _rule_arrays(kind: str, pts: np.ndarray, rng: np.random.Generator):
+    """theta, phi, near, far, h0 for ``kind`` as ``guiding._iterate`` makes them."""
+    n = len(pts)
+    theta, phi = np.zeros(n), np.zeros(n)
+    theta[[0, 17, 400]], phi[[0, 17, 400]] = [0.0, 0.4, 1.2], [0.0, 2.0, -1.0]
+    root = np.array([2.0, 2.0, 0.0])
+    rot = {"eq1": Rotation("piecewise", 6.0, -6.0, 20), "eq1_h0_1": Rotation("piecewise", 30.0, 0.0, 1),
+           "random": Rotation("random", alpha2=-3.0, h0=2), "eq2": Rotation("global", theta=25.0),
+           "helical": Rotation("helical", pitch=30.0), "rotational": Rotation("rotational"),
+           "spherical": Rotation("spherical")}[kind]  # fmt: skip
+    if rot.kind in ("helical", "rotational", "spherical"):
+        theta, phi = field_angles(rot, pts, root)
+        return theta, phi, None, None, 0
+    near, far, h0 = incremental_angles(rot, pts, root, rng)
+    return theta, phi, near, far, h0
+
+
+@pytest.mark.parametrize(
+    "kind", ["eq1", "eq1_h0_1", "random", "eq2", "helical", "rotational", "spherical"]
+)
+@pytest.mark.parametrize("seed", [0, 1])
+def test_kernel_search_equals_reference(kind, seed):
+    """The numba kernel and the pure-Python reference give the same search, with and without targets."""
+    rng = np.random.default_rng(seed)
+    pts = rng.random((2500, 3)) * [4, 4, 5]
+    cg = CsrGraph.of(yao_graph(pts, (14, 8)[seed]))
+    sources = np.array([0, 17, 400])
+    theta, phi, near, far, h0 = _rule_arrays(kind, pts, rng)
+    for targets in (None, rng.choice(len(pts), 40, replace=False)):
+        slow = reference_search(cg, sources, theta, phi, near, far, h0, targets)
+        fast = lazy_search(cg, sources, theta, phi, near, far, h0, targets)
+        _same_search(slow, fast)
+        if targets is not None:  # early exit: all targets final, the rest of the graph not searched
+            assert slow.done[targets].all() and slow.done.sum() < len(pts)
+            assert slow.done[sources].all()
+        else:
+            assert slow.done.all()
+
+
+def test_kernel_constants_are_the_references():
+    from arboretum_server.synth import kernels, paths
+
+    assert (kernels.PI, kernels.VERTICAL) == (paths.PI, paths.VERTICAL) == (np.pi, 1e-9)
+
+
+@pytest.mark.parametrize("name", ["default", "hanging", "upward", "helical", "elm", "ash"])
+def test_tree_with_kernel_equals_tree_with_reference(name):
+    """Every preset (Eq. 1, hanging, upward, helical field, Eq. 2, random angle): same tree both ways."""
+    opts = preset(name, nodes=5000)
+    states = []
+    for search in (lazy_search, reference_search):
+        rng = np.random.default_rng(4)
+        g, root = build_graph(opts, rng)
+        states.append(grow_paths(g, root, opts, rng, search=search))
+    fast, slow = states
+    assert slow.in_tree.sum() > 500
+    for f in ("in_tree", "parent", "root_hops", "generation"):
+        assert np.array_equal(getattr(fast, f), getattr(slow, f)), f
+    assert np.allclose(fast.theta, slow.theta, rtol=0, atol=1e-12)
+    assert np.allclose(fast.phi, slow.phi, rtol=0, atol=1e-12)
+
+
+def test_bundled_sample_truth_is_reproduced_exactly():
+    """The kernels changed no result: assets/synth/guiding_default_s1_truth.npz grows again bit for bit."""
+    from pathlib import Path
+
+    ref = load_truth(Path(__file__).parents[1] / "assets/synth/guiding_default_s1_truth.npz")
+    tr = grow_guiding(preset("default"), 1, "default")
+    for f in ("positions", "parent", "radii", "branch_id", "leaf_positions", "leaf_wxyz"):
+        assert np.array_equal(getattr(tr, f), getattr(ref, f)), f
+
+
+def _poisson_darts(nodes: int, seed: int):
+    lo, hi = np.array([-2.0, -2.0, 0.0]), np.array([2.0, 2.0, 3.0])
+    r = spacing_for_count(hi - lo, nodes)
+    rng = np.random.default_rng(seed)
+    m = int(1.5 * np.prod(hi - lo) / r**3)
+    return lo + rng.random((m, 3)) * (hi - lo), rng.permutation(m), lo, r
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_dart_kernel_equals_independent_set_reference(seed):
+    darts, prio, lo, r = _poisson_darts(8000, seed)
+    pairs = cKDTree(darts).query_pairs(r, output_type="ndarray")
+    ref = first_independent_set(prio, pairs[:, 0], pairs[:, 1])
+    got = np.flatnonzero(throw_darts(darts, prio, lo, r))
+    assert 7000 < len(ref) < 9000 and np.array_equal(got, ref)
+
+
+@pytest.mark.parametrize("kind", ["poisson", "uniform", "flat"])
+def test_knn_kernel_equals_ckdtree(kind):
+    rng = np.random.default_rng(3)
+    if kind == "poisson":
+        pts = poisson_disc(np.zeros(3), np.array([3.0, 3.0, 4.0]), 0.12, rng)
+    else:
+        pts = rng.random((6000, 3)) * [3.0, 3.0, 4.0 if kind == "uniform" else 0.0]
+    _, ref = cKDTree(pts).query(pts, 25)
+    got = knn(pts, 24, _cell_size(pts))
+    assert len(pts) > 4000 and np.array_equal(got, ref[:, 1:])
+
+
+def _yao_reference(pts: np.ndarray, sectors: int, k: int) -> np.ndarray:
+    """Yao neighbours by the vectorised rule: sort (sector, distance rank), first per sector."""
+    n = len(pts)
+    _, nb = cKDTree(pts).query(pts, k + 1)
+    nb = nb[:, 1:]
+    key = sector_of(pts[nb] - pts[:, None, :], sectors) * k + np.arange(k)
+    key.sort(axis=1)
+    s, col = key // k, key % k
+    first = np.ones(s.shape, bool)
+    first[:, 1:] = s[:, 1:] != s[:, :-1]
+    rows = np.broadcast_to(np.arange(n)[:, None], s.shape)[first]
+    out = np.broadcast_to(np.arange(n)[:, None], (n, sectors)).copy()
+    out[rows, s[first]] = nb[rows, col[first]]
+    return out
+
+
+@pytest.mark.parametrize("sectors", [8, 14, 26])
+def test_yao_kernel_equals_vectorised_reference(sectors):
+    pts = poisson_disc(np.zeros(3), np.array([3.0, 3.0, 4.0]), 0.12, np.random.default_rng(sectors))
+    g = yao_graph(pts, sectors)
+    assert np.array_equal(g.neighbours, _yao_reference(pts, sectors, 24))
+    evec = pts[g.neighbours] - pts[:, None, :]
+    assert np.array_equal(g.vectors, evec)
+    assert np.array_equal(g.lengths, np.linalg.norm(evec, axis=2))
 
 
 def test_matrix_to_wxyz_roundtrip(rng):

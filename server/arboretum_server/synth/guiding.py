@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -19,7 +20,7 @@ from arboretum_library.truth import TreeTruth
 
 from .endpoints import RULES, Volume, rule_ok, surface_candidates, volume_candidates
 from .fields import INCREMENTAL, Rotation, field_angles, incremental_angles
-from .paths import CsrGraph, FlatGraph, lazy_dijkstra, lazy_dijkstra_fast
+from .paths import CsrGraph, Search, lazy_search
 from .poisson import poisson_disc, spacing_for_count
 from .skeleton import skeleton_truth
 from .yao import YaoGraph, yao_graph
@@ -117,45 +118,28 @@ def grow_paths(
     opts: GuidingOptions,
     rng: np.random.Generator,
     progress: ProgressFn = no_progress,
+    search: Callable[..., Search] = lazy_search,
 ) -> TreeState:
-    """Run the iterations of path planning from ``root``; returns the tree over the graph nodes."""
+    """Run the iterations of path planning from ``root``; returns the tree over the graph nodes.
+
+    ``search`` is ``paths.lazy_search``, or ``paths.reference_search`` (the same trees, slowly).
+    """
     n = len(g.points)
     st = TreeState(root, np.zeros(n, bool), np.full(n, -1), np.zeros(n, np.int64), np.full(n, -1),
                    np.zeros(n), np.zeros(n))  # fmt: skip
     st.in_tree[root], st.generation[root] = True, 0
-    graphs = _Graphs(g)
+    cg = CsrGraph.of(g)
     for i, it in enumerate(opts.iterations):
         progress(i, len(opts.iterations), f"guiding vectors: iteration {i + 1}")
-        _iterate(graphs, st, it, i, rng)
+        _iterate(g, cg, st, it, i, rng, search)
     progress(len(opts.iterations), len(opts.iterations), "guiding vectors: done")
     return st
 
 
-class _Graphs:
-    """The graph, with its flat-list (lazy search) and CSR (static search) forms made on first use."""
-
-    def __init__(self, g: YaoGraph) -> None:
-        self.g = g
-        self._flat: FlatGraph | None = None
-        self._csr: CsrGraph | None = None
-
-    @property
-    def flat(self) -> FlatGraph:
-        if self._flat is None:
-            self._flat = FlatGraph.of(self.g)
-        return self._flat
-
-    @property
-    def csr(self) -> CsrGraph:
-        if self._csr is None:
-            self._csr = CsrGraph.of(self.g)
-        return self._csr
-
-
 def _iterate(
-    graphs: _Graphs, st: TreeState, it: Iteration, gen: int, rng: np.random.Generator
-) -> None:
-    g = graphs.g
+    g: YaoGraph, cg: CsrGraph, st: TreeState, it: Iteration, gen: int, rng: np.random.Generator,
+    search: Callable[..., Search],
+) -> None:  # fmt: skip
     pts, root = g.points, g.points[st.root]
     if it.volume is not None:
         cand = volume_candidates(pts, st.in_tree, it.volume)
@@ -169,10 +153,10 @@ def _iterate(
     theta, phi = st.theta.copy(), st.phi.copy()
     if it.rotation.kind in INCREMENTAL:
         near, far, h0 = incremental_angles(it.rotation, pts, root, rng)
-        res = lazy_dijkstra(graphs.flat, sources, theta, phi, near, far, h0, targets)
-    else:  # a directly set field: static weights, so one search in C gives the lazy result
+    else:  # a directly set field: every vector is known before the search
         theta, phi = field_angles(it.rotation, pts, root)
-        res = lazy_dijkstra_fast(graphs.csr, pts, sources, theta, phi, None, None, 0, max_runs=2)
+        near, far, h0 = None, None, 0
+    res = search(cg, sources, theta, phi, near, far, h0, targets)
     targets = targets[res.done[targets]]
     ok = rule_ok(it.rule, pts[targets, 2], pts[res.origin[targets], 2])
     _add_paths(st, res, targets[ok][: it.endpoints], gen)

@@ -4,9 +4,14 @@ When a node is finalised (popped with its least cost) its guiding vector is fixe
 (``fields``), and only then are the weights of its out-edges set: ``w = d_E (1 - e_E . v)``, written as
 ``d_E - E . v`` with the edge vector E = d_E e_E. A small floor (1e-12 d_E) keeps weights positive.
 Several source nodes start at cost 0 with their own vectors (later iterations use the tree so far).
-The search stops as soon as every target is finalised.
+The search stops as soon as every target is finalised: Dijkstra finalises nodes in the same order
+however long it runs, and a finalised node's parent and vector never change again, so the paths to
+the targets are those of the full search.
 
-This is a tight pure-Python loop over edge tuples (numba is not a dependency).
+Two implementations: ``lazy_search`` (the numba kernel ``kernels.lazy_search`` over a ``CsrGraph``),
+which the tree generator uses, and ``lazy_dijkstra``, a plain heapq loop kept as the slow,
+obviously-correct reference that the tests compare the kernel with (identical parents). Both break
+cost ties by node index, so they finalise nodes in the same order.
 """
 
 from __future__ import annotations
@@ -21,11 +26,12 @@ from .yao import YaoGraph
 
 PI = math.pi
 VERTICAL = 1e-9
+"""A guiding vector with theta below this is vertical (its azimuth is taken from the edge)."""
 
 
 @dataclass
 class FlatGraph:
-    """A Yao graph as Python lists for the search loop, built once per tree.
+    """A ``CsrGraph`` as Python lists for the reference search loop.
 
     ``edges[indptr[u]:indptr[u + 1]]`` are node u's out-edges as tuples (target, d_E, Ex, Ey, Ez);
     empty sectors are left out. Unpacking tuples in the loop is cheaper than indexing five lists.
@@ -37,22 +43,9 @@ class FlatGraph:
     py: list
 
     @classmethod
-    def of(cls, g: YaoGraph) -> FlatGraph:
-        n, s = g.neighbours.shape
-        nbr = g.neighbours.ravel()
-        keep = nbr != np.repeat(np.arange(n), s)
-        v = g.vectors.reshape(-1, 3)[keep]
-        indptr = np.concatenate([[0], np.cumsum(keep.reshape(n, s).sum(axis=1))])
-        cols = (
-            nbr[keep].tolist(),
-            g.lengths.ravel()[keep].tolist(),
-            v[:, 0].tolist(),
-            v[:, 1].tolist(),
-            v[:, 2].tolist(),
-        )
-        return cls(
-            indptr.tolist(), list(zip(*cols)), g.points[:, 0].tolist(), g.points[:, 1].tolist()
-        )
+    def of(cls, cg: CsrGraph) -> FlatGraph:
+        cols = (cg.cols.tolist(), *(cg.edge[:, i].tolist() for i in range(4)))
+        return cls(cg.indptr.tolist(), list(zip(*cols)), cg.px.tolist(), cg.py.tolist())
 
 
 @dataclass
@@ -150,105 +143,67 @@ def lazy_dijkstra(
     )  # fmt: skip
 
 
-# ---- fast path: the lazy result as the fixed point of static searches in scipy's C Dijkstra ----
+# ---- the fast search: the same loop as a numba kernel over CSR arrays ----
 
 
 @dataclass
 class CsrGraph:
     """The Yao graph's real edges (self-loops of empty sectors dropped) in CSR layout, built once."""
 
-    rows: np.ndarray
-    cols: np.ndarray
     indptr: np.ndarray
-    vec: np.ndarray
-    length: np.ndarray
-    n: int
+    """(N + 1,) int64: node u's out-edges are ``indptr[u]:indptr[u + 1]``."""
+    cols: np.ndarray
+    """(E,) int64: edge targets."""
+    edge: np.ndarray
+    """(E, 4) float64, metres: edge length d_E and edge vector E (target - source) per edge."""
+    px: np.ndarray
+    """(N,) float64: node X (for the azimuth of an edge leaving a vertical vector)."""
+    py: np.ndarray
+    """(N,) float64: node Y."""
 
     @classmethod
     def of(cls, g: YaoGraph) -> CsrGraph:
-        n, s = g.neighbours.shape
-        rows = np.repeat(np.arange(n), s)
-        cols = g.neighbours.ravel().astype(np.int64)
-        keep = cols != rows
-        indptr = np.concatenate([[0], np.cumsum(keep.reshape(n, s).sum(axis=1))])
-        return cls(
-            rows[keep],
-            cols[keep],
-            indptr,
-            g.vectors.reshape(-1, 3)[keep],
-            g.lengths.ravel()[keep],
-            n,
-        )
+        from .kernels import csr_edges
+
+        indptr, cols, edge = csr_edges(g.neighbours, g.vectors, g.lengths)
+        px, py = (np.ascontiguousarray(g.points[:, i]) for i in range(2))
+        return cls(indptr, cols, edge, px, py)
 
 
-def _levels(parent: np.ndarray, sources: np.ndarray) -> list[np.ndarray]:
-    """Nodes by hop count from ``sources`` along ``parent`` links (level 0 = the sources)."""
-    child = np.flatnonzero(parent >= 0)
-    order = child[np.argsort(parent[child], kind="stable")]
-    sp = parent[order]
-    levels = [np.asarray(sources)]
-    while True:
-        lo = np.searchsorted(sp, levels[-1])
-        cnt = np.searchsorted(sp, levels[-1], side="right") - lo
-        total = int(cnt.sum())
-        if total == 0:
-            return levels
-        start = np.repeat(lo - (np.cumsum(cnt) - cnt), cnt)
-        levels.append(order[start + np.arange(total)])
+def lazy_search(
+    cg: CsrGraph,
+    sources: np.ndarray,
+    theta: np.ndarray,
+    phi: np.ndarray,
+    alpha_near: np.ndarray | None,
+    alpha_far: np.ndarray | None,
+    h0: float,
+    targets: np.ndarray | None = None,
+) -> Search:
+    """``lazy_dijkstra`` in compiled code: the same arguments (with ``cg`` for the graph) and result."""
+    from .kernels import lazy_search as kernel
+
+    n = len(cg.px)
+    field = alpha_near is None
+    near = np.zeros(n) if alpha_near is None else np.asarray(alpha_near, np.float64)
+    far = np.zeros(n) if alpha_far is None else np.asarray(alpha_far, np.float64)
+    want = np.zeros(n, bool)
+    left = -1
+    if targets is not None:
+        want[np.asarray(targets, np.int64)] = True
+        left = int(want.sum())
+    th, ph = np.array(theta, np.float64), np.array(phi, np.float64)
+    par, hops, org, cost, done = kernel(
+        cg.indptr, cg.cols, cg.edge, cg.px, cg.py, np.asarray(sources, np.int64),
+        th, ph, near, far, float(h0), field, want, left,
+    )  # fmt: skip
+    return Search(par, hops, th, ph, org, cost, done)
 
 
-def _propagate(
-    points, parent, sources, theta, phi, near, far, h0
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Hops and guiding vectors of every reached node given the tree ``parent`` (the rule of fields)."""
-    th, ph = theta.copy(), phi.copy()
-    hops = np.zeros(len(parent), np.int64)
-    for h, nodes in enumerate(_levels(parent, sources)[1:], start=1):
-        p = parent[nodes]
-        hops[nodes] = h
-        if near is None:
-            continue
-        tp = th[p]
-        t = tp + (near[nodes] if h <= h0 else far[nodes])
-        th[nodes] = np.clip(t, 0.0, PI)
-        edge = np.arctan2(points[nodes, 1] - points[p, 1], points[nodes, 0] - points[p, 0])
-        ph[nodes] = np.where(tp < VERTICAL, edge, ph[p])
-    return hops, th, ph
-
-
-def lazy_dijkstra_fast(
-    cg: CsrGraph, points: np.ndarray, sources: np.ndarray, theta: np.ndarray, phi: np.ndarray,
-    alpha_near: np.ndarray | None, alpha_far: np.ndarray | None, h0: float, max_runs: int = 40,
-) -> Search | None:  # fmt: skip
-    """The same result as ``lazy_dijkstra`` (whole graph), or None when ``max_runs`` do not converge.
-
-    Start with every non-source vector vertical; repeat: weights from the current vectors, one static
-    multi-source search (scipy, C), vectors re-derived from the resulting tree by the rule. Once the
-    tree no longer changes, every node's out-edge weights are those the lazy search would have set
-    when finalising it, so the static search replays the lazy one: the fixed point is its result.
-    """
-    from scipy.sparse import csr_matrix
-    from scipy.sparse.csgraph import dijkstra
-
-    sources = np.unique(sources)
-    th, ph = theta.copy(), phi.copy()
-    if alpha_near is not None:
-        rest = np.ones(cg.n, bool)
-        rest[sources] = False
-        th[rest] = 0.0
-    prev = None
-    for _ in range(max_runs):
-        st = np.sin(th)
-        v = np.stack([st * np.cos(ph), st * np.sin(ph), np.cos(th)], axis=1)[cg.rows]
-        w = cg.length - (cg.vec[:, 0] * v[:, 0] + cg.vec[:, 1] * v[:, 1] + cg.vec[:, 2] * v[:, 2])
-        w = np.maximum(w, 1e-12 * cg.length)
-        mat = csr_matrix((w, cg.cols, cg.indptr), shape=(cg.n, cg.n))
-        cost, pred, origin = dijkstra(mat, indices=sources, min_only=True, return_predecessors=True)
-        pred = np.where(pred < 0, -1, pred).astype(np.int64)
-        hops, th, ph = _propagate(points, pred, sources, theta, phi, alpha_near, alpha_far, h0)
-        if prev is not None and np.array_equal(pred, prev):
-            done = np.isfinite(cost)
-            origin = np.where(origin < 0, np.arange(cg.n), origin).astype(np.int64)
-            return Search(pred, hops, th, ph, origin, cost, done)
-        prev = pred
-    return None
+def reference_search(
+    cg: CsrGraph, sources: np.ndarray, theta: np.ndarray, phi: np.ndarray,
+    alpha_near: np.ndarray | None, alpha_far: np.ndarray | None, h0: float,
+    targets: np.ndarray | None = None,
+) -> Search:  # fmt: skip
+    """``lazy_dijkstra`` with ``lazy_search``'s signature: the reference, for tests and the bench."""
+    return lazy_dijkstra(FlatGraph.of(cg), sources, theta, phi, alpha_near, alpha_far, h0, targets)

@@ -1,10 +1,11 @@
-"""Poisson-disc node sets in a box: random-order dart throwing, run as a vectorised independent set.
+"""Poisson-disc node sets in a box: random-order dart throwing.
 
 Darts are drawn uniformly (``oversample`` per r^3 of volume) and each gets a random priority. A dart is
 kept when no dart of lower priority within ``r`` was kept: the sequential dart-throwing result in
-priority order. It is computed in a few vectorised rounds (the lexicographically-first maximal
-independent set of the "closer than r" graph): every undecided dart whose priority is the lowest among
-its undecided neighbours is kept, and its neighbours are dropped. No two kept points are closer than r.
+priority order, computed by the numba kernel ``kernels.throw_darts`` over a grid of r-sized cells.
+``first_independent_set`` is its vectorised reference (the lexicographically-first maximal independent
+set of the "within r" graph, in rounds: every undecided dart whose priority is the lowest among its
+undecided neighbours is kept, and its neighbours are dropped). No two kept points are closer than r.
 """
 
 from __future__ import annotations
@@ -27,19 +28,22 @@ def poisson_disc(lo: np.ndarray, hi: np.ndarray, r: float, rng: np.random.Genera
 
     Same generator state, same points. M is about ``DENSITY * volume / r**3``.
     """
-    from scipy.spatial import cKDTree
+    from .kernels import throw_darts
 
     lo = np.asarray(lo, dtype=np.float64)
     hi = np.asarray(hi, dtype=np.float64)
     m = max(int(OVERSAMPLE * np.prod(hi - lo) / r**3), 1)
     darts = lo + rng.random((m, 3)) * (hi - lo)
     prio = rng.permutation(m)
-    pairs = cKDTree(darts).query_pairs(r, output_type="ndarray")
-    return darts[np.sort(_first_independent_set(prio, pairs[:, 0], pairs[:, 1]))]
+    return darts[throw_darts(darts, prio, lo, r)]
 
 
-def _first_independent_set(prio: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Indices of the greedy independent set in ``prio`` order of the graph with edges (a, b)."""
+def first_independent_set(prio: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Indices (sorted) of the greedy independent set in ``prio`` order of the graph with edges (a, b).
+
+    With ``a``, ``b`` the pairs within r (``cKDTree.query_pairs``) this is the reference of
+    ``kernels.throw_darts``.
+    """
     m = len(prio)
     state = np.zeros(m, np.int8)  # 0 undecided, 1 kept, 2 dropped
     while (state == 0).any():

@@ -8,9 +8,10 @@ In 3D we cut the directions around a node into cones that tile the sphere, named
   cones about 55 degrees wide, paths noticeably straighter for the cost of 1.75x the edges);
 * ``26`` nearest of the 26 directions to the neighbours of a cell in a 3x3x3 block.
 
-Construction is vectorised: one cKDTree query of the ``k`` nearest neighbours, a sector code per
-neighbour, then per node and sector the first (nearest) neighbour in that sector. A sector with no node
-among the ``k`` nearest gets no edge (only at the volume's boundary for the default ``k``).
+Construction: one cKDTree query of the ``k`` nearest neighbours, then per node and sector the first
+(nearest) neighbour in that sector, in the numba kernel ``kernels.yao_select``; ``sector_of`` is the
+vectorised reference of its sector rule. A sector with no node among the ``k`` nearest gets no edge
+(only at the volume's boundary for the default ``k``).
 """
 
 from __future__ import annotations
@@ -85,26 +86,24 @@ def _lookup(sectors: int) -> np.ndarray:
 
 
 _LOOKUP = {s: _lookup(s) for s in (14, 26)}
+_NONE = np.zeros(27, np.int32)  # the octants need no table
+
+
+def _cell_size(points: np.ndarray) -> float:
+    """Grid cell edge for the k-nearest search: the mean spacing, at least 1/256 of the extent."""
+    span = np.ptp(points, axis=0)
+    mean = (float(np.prod(span)) / len(points)) ** (1 / 3)
+    return max(mean, float(span.max()) / 256, 1e-9)
 
 
 def yao_graph(points: np.ndarray, sectors: int = 14, k: int = 24, workers: int = 2) -> YaoGraph:
     """Build the Yao graph of ``points`` (N, 3) with ``sectors`` cones, searching the ``k`` nearest."""
-    from scipy.spatial import cKDTree
+    if sectors not in SECTOR_COUNTS:
+        raise ValueError(f"sectors must be one of {SECTOR_COUNTS}, got {sectors}")
+    from .kernels import knn, yao_select
 
-    points = np.asarray(points, dtype=np.float64)
-    n = len(points)
-    k = min(k, n - 1)
-    _, nb = cKDTree(points).query(points, k + 1, workers=workers)
-    nb = nb[:, 1:]
-    vec = points[nb] - points[:, None, :]
-    sec = sector_of(vec, sectors)
-    key = sec * k + np.arange(k, dtype=np.int32)  # neighbours are sorted by distance
-    key.sort(axis=1)
-    s, col = key // k, key % k
-    first = np.ones(s.shape, bool)
-    first[:, 1:] = s[:, 1:] != s[:, :-1]
-    rows = np.broadcast_to(np.arange(n)[:, None], s.shape)[first]
-    out = np.broadcast_to(np.arange(n, dtype=np.int32)[:, None], (n, sectors)).copy()
-    out[rows, s[first]] = nb[rows, col[first]]
-    evec = points[out] - points[:, None, :]
-    return YaoGraph(points, out, evec, np.linalg.norm(evec, axis=2))
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    k = min(k, len(points) - 1)
+    nb = knn(points, k, _cell_size(points))
+    out, vec, length = yao_select(points, nb, sectors, _LOOKUP.get(sectors, _NONE))
+    return YaoGraph(points, out, vec, length)
