@@ -170,3 +170,13 @@ def test_pipe_radii_positive_and_child_not_thicker():
     for b in range(1, 4):
         assert radii[b][0] <= radii[parents[b]][pvs[b]] + 1e-12
         assert (np.diff(radii[b]) <= 1e-12).all()
+
+
+def test_farthest_points_on_clouds_smaller_than_the_kd_tree():
+    """fpsample's default tree height needs 128 points; sparse photo clouds have fewer."""
+    from arboretum_server.decompose.sampling import farthest_points
+
+    pts = np.random.default_rng(3).normal(size=(60, 3))
+    idx = farthest_points(pts, 20, 0)
+    assert len(idx) == 20 and len(set(idx.tolist())) == 20
+    assert idx.min() >= 0 and idx.max() < 60

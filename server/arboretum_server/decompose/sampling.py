@@ -18,7 +18,10 @@ def farthest_points(points: np.ndarray, n: int, start: int) -> np.ndarray:
     n = int(min(n, len(points)))
     if n <= 1:
         return np.array([start], dtype=np.int64)
-    idx = fpsample.bucket_fps_kdline_sampling(np.ascontiguousarray(points, np.float64), n, h=7, start_idx=start)
+    # The k-d tree height h needs 2**h <= N points (fpsample raises otherwise): small clouds, such as
+    # sparse photo reconstructions, get a shallower tree.
+    h = int(min(7, max(1, np.log2(len(points)))))
+    idx = fpsample.bucket_fps_kdline_sampling(np.ascontiguousarray(points, np.float64), n, h=h, start_idx=start)
     return np.asarray(idx, dtype=np.int64)
 
 

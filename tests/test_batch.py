@@ -1,0 +1,212 @@
+"""``arboretum library build``: parallel decomposition on a Dask LocalCluster, resumable, bad scans skipped."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from arboretum_library.pointio import write_points
+from arboretum_library.store import Library
+from arboretum_server.batch.build import BuildOptions, build_library, expand_scans, species_for
+from arboretum_server.batch.plots import nice_ticks
+from arboretum_server.batch.report import write_report
+from arboretum_server.batch.synthetic import synthetic_scans
+from arboretum_server.batch.tasks import SCAN_EXAMPLES_KEY
+from arboretum_server.decompose.examples import file_sha256
+
+POINTS = 1500
+OPTS = BuildOptions(workers=2, points=POINTS)
+
+
+@pytest.fixture(scope="module")
+def scans(tmp_path_factory) -> dict[str, list[Path]]:
+    """4 good synthetic scans and 3 bad ones (unparsable, empty, a flat plane that is no tree)."""
+    folder = tmp_path_factory.mktemp("scans")
+    good = synthetic_scans(folder, 4, points=POINTS)
+    (folder / "broken.xyz").write_text("this is not\na point cloud 1 2\n")
+    (folder / "empty.xyz").write_text("")
+    rng = np.random.default_rng(0)
+    plane = np.c_[rng.uniform(-1, 1, (800, 2)), rng.normal(0, 0.002, 800)]
+    write_points(folder / "plane.xyz", plane)
+    bad = [folder / "broken.xyz", folder / "empty.xyz", folder / "plane.xyz"]
+    return {"good": good, "bad": bad, "folder": [folder]}
+
+
+@pytest.fixture(scope="module")
+def built(scans, tmp_path_factory):
+    lib = tmp_path_factory.mktemp("lib") / "lib"
+    result = build_library([str(p) for p in scans["good"] + scans["bad"]], lib, OPTS)
+    return lib, result
+
+
+def _examples_per_source(lib_path: Path) -> dict[str, list[str]]:
+    with Library.open(lib_path, readonly=True) as lib:
+        out: dict[str, list[str]] = {}
+        for e in lib.entries():
+            out.setdefault(e.source_sha256, []).append(e.id)
+        return out
+
+
+def test_build_adds_good_scans_and_reports_bad_ones(built, scans):
+    lib, result = built
+    status = {Path(r.path).name: r.status for r in result.records}
+    assert [status[p.name] for p in scans["good"]] == ["added"] * 4
+    assert [status[p.name] for p in scans["bad"]] == ["failed"] * 3
+    errors = {Path(r.path).name: r.error for r in result.records if r.status == "failed"}
+    assert "empty" in errors["empty.xyz"] and "trunk" in errors["plane.xyz"]
+    per_source = _examples_per_source(lib)
+    for p in scans["good"]:
+        rec = next(r for r in result.records if r.path == str(p))
+        assert sorted(per_source[file_sha256(p)]) == sorted(rec.examples) and len(rec.examples) >= 1
+        assert rec.seconds["decompose"] > 0 and rec.stats["points"] <= POINTS
+    with Library.open(lib, readonly=True) as L:
+        assert len(L) == sum(len(r.examples) for r in result.records)
+        e = L.entries()[0]
+        assert e.species in ("apple", "cherry", "ginkgo", "walnut")
+        assert L.get(e.id).provenance.parameters[SCAN_EXAMPLES_KEY] == len(L.find_source(e.source_sha256))
+    assert result.workers == 2 and result.cluster == "LocalCluster"
+
+
+def test_rerun_skips_done_scans_without_a_cluster(built, scans):
+    lib, first = built
+    before = _examples_per_source(lib)
+    again = build_library([str(p) for p in scans["good"]], lib, OPTS)
+    assert again.count("skipped") == 4 and again.count("added") == 0
+    assert again.cluster == "" and again.workers == 0  # nothing left to do: no cluster started
+    assert _examples_per_source(lib) == before
+
+
+def test_half_stored_scan_is_redone(scans, tmp_path):
+    lib = tmp_path / "lib"
+    good = [str(p) for p in scans["good"][:2]]
+    build_library(good, lib, OPTS)
+    sha = file_sha256(good[0])
+    with Library.open(lib) as L:
+        ids = L.find_source(sha)
+        L.delete(ids[-1])  # as if the build had been killed while storing this scan
+    again = build_library(good, lib, OPTS)
+    assert again.redone == 1 and again.count("added") == 1 and again.count("skipped") == 1
+    assert len(_examples_per_source(lib)[sha]) == len(ids)
+
+
+def test_existing_scheduler_and_duplicates(scans, tmp_path):
+    from distributed import LocalCluster
+
+    copy = tmp_path / "copy_of_apple.ply"
+    copy.write_bytes(scans["good"][0].read_bytes())
+    with LocalCluster(n_workers=1, threads_per_worker=1, dashboard_address=None, scheduler_port=0) as cluster:
+        opts = BuildOptions(scheduler=cluster.scheduler_address, points=POINTS)
+        result = build_library([str(scans["good"][0]), str(copy)], tmp_path / "lib", opts)
+    assert [r.status for r in result.records] == ["added", "duplicate"]
+    assert result.cluster == cluster.scheduler_address and result.workers == 1
+
+
+def test_unreachable_scheduler_is_one_error(scans, tmp_path, capsys):
+    from arboretum_library.cli import main
+
+    code = main(["library", "build", str(scans["good"][0]), "--library", str(tmp_path / "lib"),
+                 "--scheduler", "tcp://127.0.0.1:9"])
+    assert code == 2 and "cannot reach the Dask scheduler" in capsys.readouterr().err
+
+
+def test_report_has_markdown_json_and_plots(built, tmp_path):
+    from PIL import Image
+
+    lib, result = built
+    files = write_report(result, tmp_path / "rep")
+    md = Path(files["markdown"]).read_text()
+    assert md.count("| added |") == 4 and md.count("| failed |") == 3
+    assert "![" in md and "curvature_lobes.png" in md
+    data = json.loads(Path(files["json"]).read_text())
+    assert (data["added"], data["failed"], data["scans"]) == (4, 3, 7)
+    img = np.asarray(Image.open(files["curvature_lobes"]).convert("RGB"))
+    assert img.shape == (480, 720, 3)
+    # one coloured marker series per species: the apple colour (first series) is drawn
+    assert np.all(img == [31, 119, 180], axis=2).sum() > 20
+    bars = np.asarray(Image.open(files["scan_seconds"]).convert("RGB"))
+    assert np.all(bars == [214, 39, 40], axis=2).sum() > 0  # failed scans in red
+
+
+def test_helpers():
+    assert species_for("/data/Cherry_tree_07.ply", None) == "cherry"
+    assert species_for("/data/x.ply", None) == "unknown"
+    assert species_for("/data/apple.ply", "Pine") == "pine"
+    assert nice_ticks(0, 9.3) == [0, 2, 4, 6, 8, 10]
+    with pytest.raises(Exception, match="workers"):
+        BuildOptions(workers=0)
+
+
+def test_expand_scans_folder(scans):
+    files = expand_scans([str(scans["folder"][0])])
+    assert len(files) == 7 and files == sorted(files)
+
+
+def _build_cmd(scans: list[Path], lib: Path) -> list[str]:
+    return [sys.executable, "-m", "arboretum_library.cli", "library", "build", *map(str, scans),
+            "--library", str(lib), "--workers", "2", "--points", str(POINTS), "--json"]
+
+
+def _complete_scans(lib: Path) -> int:
+    with Library.open(lib, readonly=True) as L:
+        per = {}
+        for e in L.entries():
+            per.setdefault(e.source_sha256, []).append(e.id)
+        return sum(len(ids) == L.get(ids[0]).provenance.parameters[SCAN_EXAMPLES_KEY] for ids in per.values())
+
+
+def _wait_for_a_scan(lib: Path, proc: subprocess.Popen, timeout: float = 120.0) -> int:
+    """Wait until the build has stored every example of at least one scan."""
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        if proc.poll() is not None:
+            pytest.fail(f"build ended before it could be killed (exit {proc.returncode})")
+        if (lib / "catalog.sqlite").exists():
+            try:
+                if (n := _complete_scans(lib)) > 0:
+                    return n
+            except Exception:  # the catalog is being created, or an example is being written
+                pass
+        time.sleep(0.1)
+    pytest.fail("no example was stored in time")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, pytest.param(signal.SIGINT, marks=pytest.mark.slow)])
+def test_killed_build_resumes_without_redoing(scans, tmp_path, sig):
+    good = scans["good"]
+    more = synthetic_scans(tmp_path / "more", 2, points=POINTS, first_seed=20)
+    lib = tmp_path / "lib"
+    env = {**os.environ, "OMP_WAIT_POLICY": "PASSIVE"}
+    proc = subprocess.Popen(_build_cmd(good + more, lib), env=env, start_new_session=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        _wait_for_a_scan(lib, proc)
+        if sig == signal.SIGKILL:
+            os.killpg(proc.pid, signal.SIGKILL)  # the client and its workers, as a crash would
+        else:
+            proc.send_signal(signal.SIGINT)  # Ctrl-C in the client
+        code = proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert code == (-signal.SIGKILL if sig == signal.SIGKILL else 130)
+    with Library.open(lib, readonly=True) as L:
+        done_before = {sha for sha, ids in _examples_per_source(lib).items()
+                       if len(ids) == L.get(ids[0]).provenance.parameters[SCAN_EXAMPLES_KEY]}
+    result = build_library([str(p) for p in good + more], lib, OPTS)
+    assert result.count("failed") == 0 and result.count("added") + result.count("skipped") == 6
+    skipped = {r.sha256 for r in result.records if r.status == "skipped"}
+    assert skipped == done_before and len(skipped) >= 1  # complete scans are not done again
+    per_source = _examples_per_source(lib)
+    assert len(per_source) == 6
+    with Library.open(lib, readonly=True) as L:
+        for ids in per_source.values():
+            assert len(ids) == L.get(ids[0]).provenance.parameters[SCAN_EXAMPLES_KEY]
