@@ -430,7 +430,7 @@ def test_truth_save_load_roundtrip(tmp_path):
     (tmp_path / "bad.npz").write_bytes(b"not a zip")
     with pytest.raises(InputError, match="bad.npz"):
         load_truth(tmp_path / "bad.npz")
-    with pytest.raises(InputError, match="not found"):
+    with pytest.raises(InputError, match="no such file"):
         load_truth(tmp_path / "missing.npz")
 
 

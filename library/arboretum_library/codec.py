@@ -90,10 +90,11 @@ def unflatten(cls: type[T], meta: Any, arrays: Mapping[str, np.ndarray]) -> T:
     return dec(cls, meta, cls.__name__)
 
 
-def arrays_to_npz(arrays: Mapping[str, np.ndarray]) -> bytes:
-    """Serialise named arrays to the bytes of an uncompressed .npz (no pickled objects)."""
+def arrays_to_npz(arrays: Mapping[str, np.ndarray], *, compress: bool = False) -> bytes:
+    """Serialise named arrays to the bytes of an .npz, deflated when ``compress`` (no pickled objects)."""
     buf = io.BytesIO()
-    np.savez(buf, **{k: np.ascontiguousarray(a) for k, a in arrays.items()})
+    save = np.savez_compressed if compress else np.savez
+    save(buf, **{k: np.ascontiguousarray(a) for k, a in arrays.items()})
     return buf.getvalue()
 
 
@@ -112,7 +113,7 @@ META_KEY = "__meta__"
 RECORD_SCHEMA = 1
 
 
-def save_record(path: str | os.PathLike, record: Any) -> Path:
+def save_record(path: str | os.PathLike, record: Any, *, compress: bool = False) -> Path:
     """Write ``record`` to one .npz file atomically (temp file + rename); returns the path.
 
     The file holds every array under its path key and ``__meta__``: JSON ``{"kind": type name,
@@ -126,7 +127,7 @@ def save_record(path: str | os.PathLike, record: Any) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
-        tmp.write_bytes(arrays_to_npz(arrays))
+        tmp.write_bytes(arrays_to_npz(arrays, compress=compress))
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)

@@ -13,17 +13,15 @@ Leaf cards: leaf ``j`` is a flat card centred on ``leaf_positions[j]``. Its unit
 +Y across it, card +Z is the blade normal. The card spans ``leaf_sizes[j]`` along X and
 ``leaf_sizes[j] * LEAF_WIDTH_RATIO`` along Y; the blade is the ellipse inscribed in the card.
 
-Files: ``save_truth`` writes a compressed .npz (``allow_pickle=False``) holding the arrays of
-``codec.flatten`` plus a ``meta.json`` entry (UTF-8 JSON bytes as uint8) with the format tag and the
-scalar fields; the write goes to a temporary file first and is then renamed, so Ctrl-C never leaves a
-broken file.
+Files: ``save_truth`` / ``load_truth`` are ``codec.save_record`` / ``load_record`` with compression:
+one .npz holding the arrays and a ``__meta__`` JSON entry (kind ``TreeTruth``), written to a temporary
+file and renamed, so Ctrl-C never leaves a broken file.
 """
 
 from __future__ import annotations
 
 import json
 import os
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,8 +30,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .codec import flatten, npz_to_arrays, unflatten
-from .errors import InputError, ValidationError
+from .codec import load_record, save_record
+from .errors import ValidationError
 from .geometry import quat_to_matrix
 from .model import _frozen_array
 
@@ -42,9 +40,6 @@ I32 = NDArray[np.int32]
 
 LEAF_WIDTH_RATIO = 0.5
 """Width of a leaf card (card Y extent) as a fraction of its size (card X extent)."""
-FORMAT = "arboretum.truth"
-VERSION = 1
-META_KEY = "meta.json"
 
 
 def _empty(shape: tuple[int, ...], dtype: type = np.float64):
@@ -249,44 +244,10 @@ def leaf_card_corners(truth: TreeTruth) -> np.ndarray:
 
 
 def save_truth(path: str | os.PathLike, truth: TreeTruth) -> Path:
-    """Write ``truth`` to ``path`` (compressed .npz) atomically (temporary file, then rename). Returns the path."""
-    path = Path(path)
-    meta, arrays = flatten(truth)
-    doc = {"format": FORMAT, "version": VERSION, "record": meta}
-    arrays = dict(arrays)
-    arrays[META_KEY] = np.frombuffer(json.dumps(doc, sort_keys=True).encode(), dtype=np.uint8)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez_compressed(fh, **{k: np.ascontiguousarray(a) for k, a in arrays.items()})
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    """Write ``truth`` to ``path`` atomically as a compressed record file (``codec.save_record``)."""
+    return save_record(path, truth, compress=True)
 
 
 def load_truth(path: str | os.PathLike) -> TreeTruth:
     """Read a ``TreeTruth`` written by ``save_truth``; ``InputError`` if missing, foreign or broken."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: ground-truth file not found")
-    try:
-        arrays = npz_to_arrays(path.read_bytes(), where=str(path))
-    except ValidationError as exc:
-        raise InputError(str(exc)) from None
-    if META_KEY not in arrays:
-        raise InputError(f"{path}: not an Arboretum ground-truth file (no {META_KEY} entry)")
-    try:
-        doc = json.loads(arrays.pop(META_KEY).tobytes().decode())
-    except (UnicodeDecodeError, ValueError) as exc:
-        raise InputError(f"{path}: metadata is not valid JSON ({exc})") from None
-    if doc.get("format") != FORMAT or doc.get("version") != VERSION:
-        raise InputError(
-            f"{path}: expected {FORMAT} version {VERSION}, got {doc.get('format')} version {doc.get('version')}"
-        )
-    try:
-        return unflatten(TreeTruth, doc["record"], arrays)
-    except ValidationError as exc:
-        raise InputError(f"{path}: {exc}") from None
+    return load_record(path, TreeTruth)
