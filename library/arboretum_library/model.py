@@ -42,7 +42,7 @@ class Level(IntEnum):
     TWIG = 2
 
 
-def _frozen_array(owner: object, name: str, value: Any, dtype: type, shape: tuple) -> np.ndarray:
+def frozen_array(owner: object, name: str, value: Any, dtype: type, shape: tuple) -> np.ndarray:
     """Copy ``value`` to a read-only array of ``dtype`` and check its shape (None = any length)."""
     where = f"{type(owner).__name__}.{name}"
     try:
@@ -50,7 +50,8 @@ def _frozen_array(owner: object, name: str, value: Any, dtype: type, shape: tupl
     except (TypeError, ValueError) as exc:
         raise ValidationError(f"{where}: cannot convert to {np.dtype(dtype).name}: {exc}") from None
     if arr.ndim != len(shape) or any(s is not None and s != a for s, a in zip(shape, arr.shape)):
-        want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+        dims = ["N" if s is None else str(s) for s in shape]
+        want = f"({dims[0]},)" if len(dims) == 1 else "(" + ", ".join(dims) + ")"
         raise ValidationError(f"{where}: expected shape {want}, got {arr.shape}")
     if arr.dtype.kind == "f" and arr.size and not np.isfinite(arr).all():
         bad = int((~np.isfinite(arr)).sum())
@@ -83,10 +84,10 @@ class Branch:
     """MAIN, SECONDARY or TWIG."""
 
     def __post_init__(self) -> None:
-        pts = _frozen_array(self, "points", self.points, np.float64, (None, 3))
+        pts = frozen_array(self, "points", self.points, np.float64, (None, 3))
         if len(pts) < 2:
             raise ValidationError(f"Branch.points: a branch needs at least 2 vertices, got {len(pts)}")
-        rad = _frozen_array(self, "radii", self.radii, np.float64, (len(pts),))
+        rad = frozen_array(self, "radii", self.radii, np.float64, (len(pts),))
         if (rad <= 0).any():
             raise ValidationError(f"Branch.radii: {int((rad <= 0).sum())} radius(es) are not > 0")
         object.__setattr__(self, "level", Level(self.level))
@@ -115,10 +116,10 @@ class Lobe:
     """Index of the feeding secondary branch in the owning structure's ``branches``; -1 for none."""
 
     def __post_init__(self) -> None:
-        _frozen_array(self, "points", self.points, np.float64, (None, 3))
-        verts = _frozen_array(self, "hull_vertices", self.hull_vertices, np.float64, (None, 3))
-        faces = _frozen_array(self, "hull_faces", self.hull_faces, np.int32, (None, 3))
-        _frozen_array(self, "centre", self.centre, np.float64, (3,))
+        frozen_array(self, "points", self.points, np.float64, (None, 3))
+        verts = frozen_array(self, "hull_vertices", self.hull_vertices, np.float64, (None, 3))
+        faces = frozen_array(self, "hull_faces", self.hull_faces, np.int32, (None, 3))
+        frozen_array(self, "centre", self.centre, np.float64, (3,))
         if len(verts) < 4 or len(faces) < 4:
             raise ValidationError(
                 f"Lobe.hull_faces: a closed hull needs >= 4 vertices and faces, got {len(verts)} and {len(faces)}"
@@ -146,9 +147,9 @@ class HBL:
     """(N,) uint8: WOOD (0) or LEAF (1) for each source point."""
 
     def __post_init__(self) -> None:
-        _frozen_array(self, "root", self.root, np.float64, (3,))
-        pts = _frozen_array(self, "points", self.points, np.float64, (None, 3))
-        labels = _frozen_array(self, "labels", self.labels, np.uint8, (len(pts),))
+        frozen_array(self, "root", self.root, np.float64, (3,))
+        pts = frozen_array(self, "points", self.points, np.float64, (None, 3))
+        labels = frozen_array(self, "labels", self.labels, np.uint8, (len(pts),))
         if labels.size and labels.max() > LEAF:
             raise ValidationError("HBL.labels: values must be 0 (wood) or 1 (leaf)")
         object.__setattr__(self, "branches", tuple(self.branches))
@@ -240,7 +241,7 @@ class LobeTransform:
     """(4, 4) float64: rotation, uniform scale and translation applied about the lobe centre."""
 
     def __post_init__(self) -> None:
-        _frozen_array(self, "T_example_lobe", self.T_example_lobe, np.float64, (4, 4))
+        frozen_array(self, "T_example_lobe", self.T_example_lobe, np.float64, (4, 4))
 
 
 def _check_rigid(owner: object, name: str, T: np.ndarray) -> None:
@@ -266,7 +267,7 @@ class Placement:
     lobe_transforms: tuple[LobeTransform, ...] = ()
 
     def __post_init__(self) -> None:
-        T = _frozen_array(self, "T_world_example", self.T_world_example, np.float64, (4, 4))
+        T = frozen_array(self, "T_world_example", self.T_world_example, np.float64, (4, 4))
         _check_rigid(self, "T_world_example", T)
         if not (math.isfinite(self.scale) and self.scale > 0):
             raise ValidationError(f"Placement.scale: must be a finite number > 0, got {self.scale}")

@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from . import pointio_formats as fmt
 from .errors import InputError, ValidationError
 from .geometry import yup_to_zup, zup_to_yup
-from .model import LEAF, _frozen_array
+from .model import LEAF, frozen_array
 from .pointio_pcd import read_pcd
 from .pointio_spatial import even_sample_indices, guess_up_axis, median_spacing, trunk_base
 
@@ -82,18 +82,18 @@ class PointCloud:
     """The up axis of the file as read: 'z' or 'y' (points are Z up either way)."""
 
     def __post_init__(self) -> None:
-        pts = _frozen_array(self, "points", self.points, np.float64, (None, 3))
+        pts = frozen_array(self, "points", self.points, np.float64, (None, 3))
         n = len(pts)
         if self.colors is not None:
-            col = _frozen_array(self, "colors", self.colors, np.float32, (n, 3))
+            col = frozen_array(self, "colors", self.colors, np.float32, (n, 3))
             if col.size and (col.min() < 0 or col.max() > 1):
                 raise ValidationError("PointCloud.colors: values must lie in [0, 1]")
         if self.labels is not None:
-            lab = _frozen_array(self, "labels", self.labels, np.uint8, (n,))
+            lab = frozen_array(self, "labels", self.labels, np.uint8, (n,))
             if lab.size and lab.max() > LEAF:
                 raise ValidationError("PointCloud.labels: values must be 0 (wood) or 1 (leaf)")
         if self.branch_ids is not None:
-            _frozen_array(self, "branch_ids", self.branch_ids, np.int32, (n,))
+            frozen_array(self, "branch_ids", self.branch_ids, np.int32, (n,))
         if self.up_axis not in ("z", "y"):
             raise ValidationError(f"PointCloud.up_axis: must be 'z' or 'y', got {self.up_axis!r}")
 

@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 from .codec import load_record, save_record
 from .errors import ValidationError
 from .geometry import quat_to_matrix
-from .model import _frozen_array
+from .model import frozen_array
 
 F64 = NDArray[np.float64]
 I32 = NDArray[np.int32]
@@ -78,19 +78,19 @@ class TreeTruth:
     """Every generator parameter (JSON-serialisable), so the tree can be grown again."""
 
     def __post_init__(self) -> None:
-        pos = _frozen_array(self, "positions", self.positions, np.float64, (None, 3))
+        pos = frozen_array(self, "positions", self.positions, np.float64, (None, 3))
         n = len(pos)
         if n < 2:
             raise ValidationError(f"TreeTruth.positions: a skeleton needs >= 2 nodes, got {n}")
-        rad = _frozen_array(self, "radii", self.radii, np.float64, (n,))
+        rad = frozen_array(self, "radii", self.radii, np.float64, (n,))
         if (rad <= 0).any():
             raise ValidationError(
                 f"TreeTruth.radii: {int((rad <= 0).sum())} radius(es) are not > 0"
             )
-        parent = _frozen_array(self, "parent", self.parent, np.int32, (n,))
+        parent = frozen_array(self, "parent", self.parent, np.int32, (n,))
         _check_topology(parent)
-        bid = _frozen_array(self, "branch_id", self.branch_id, np.int32, (n,))
-        order = _frozen_array(self, "branch_order", self.branch_order, np.int32, (n,))
+        bid = frozen_array(self, "branch_id", self.branch_id, np.int32, (n,))
+        order = frozen_array(self, "branch_order", self.branch_order, np.int32, (n,))
         _check_branches(parent, bid, order)
         self._validate_leaves(n)
         try:
@@ -101,14 +101,14 @@ class TreeTruth:
         object.__setattr__(self, "seed", int(self.seed))
 
     def _validate_leaves(self, n: int) -> None:
-        lp = _frozen_array(self, "leaf_positions", self.leaf_positions, np.float64, (None, 3))
+        lp = frozen_array(self, "leaf_positions", self.leaf_positions, np.float64, (None, 3))
         m = len(lp)
-        q = _frozen_array(self, "leaf_wxyz", self.leaf_wxyz, np.float64, (m, 4))
+        q = frozen_array(self, "leaf_wxyz", self.leaf_wxyz, np.float64, (m, 4))
         if m and np.abs(np.linalg.norm(q, axis=1) - 1.0).max() > 1e-6:
             raise ValidationError(
                 "TreeTruth.leaf_wxyz: quaternions must have unit length (within 1e-6)"
             )
-        sizes = _frozen_array(self, "leaf_sizes", self.leaf_sizes, np.float64, (m,))
+        sizes = frozen_array(self, "leaf_sizes", self.leaf_sizes, np.float64, (m,))
         if (sizes <= 0).any():
             raise ValidationError(
                 f"TreeTruth.leaf_sizes: {int((sizes <= 0).sum())} size(s) are not > 0"
@@ -116,7 +116,7 @@ class TreeTruth:
         node = np.asarray(self.leaf_node, dtype=np.int32).reshape(-1)
         if m and node.size == 0:
             node = _nearest_nodes(lp, self.positions)
-        node = _frozen_array(self, "leaf_node", node, np.int32, (m,))
+        node = frozen_array(self, "leaf_node", node, np.int32, (m,))
         if m and (node.min() < 0 or node.max() >= n):
             raise ValidationError(f"TreeTruth.leaf_node: indices must lie in 0..{n - 1}")
 
