@@ -440,7 +440,7 @@ def test_point_cloud_validates():
     with pytest.raises(ValidationError, match="PointCloud.colors: values must lie in"):
         PointCloud(points=pts, colors=np.full((3, 3), 1.5))
     with pytest.raises(
-        ValidationError, match=r"PointCloud.branch_ids: expected shape \(3\), got \(2,\)"
+        ValidationError, match=r"PointCloud.branch_ids: expected shape \(3,\), got \(2,\)"
     ):
         PointCloud(points=pts, branch_ids=np.zeros(2))
     with pytest.raises(ValidationError, match="up_axis"):
