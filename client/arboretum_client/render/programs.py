@@ -1,6 +1,7 @@
 """Shader programs: GLSL 3.3 core sources shipped as package data (``render/shaders/*.glsl``, read
 with importlib.resources), each compiled twice: for colour and, with ``#define PICK``, for the integer
-ID buffer used by picking.
+ID buffer used by picking. GLSL has no includes, so a line ``//#include NAME`` in a source is replaced
+by the text of ``shaders/NAME`` (code several shaders share: outputs, highlight, transform).
 """
 
 from __future__ import annotations
@@ -24,11 +25,35 @@ PROGRAMS: dict[str, tuple[str, ...]] = {
 PICKABLE = ("lit", "instanced", "points", "lines")
 
 
+INCLUDE = "//#include "
+"""A source line starting with this is replaced by the shader file it names."""
+
+
 def shader_source(name: str, defines: tuple[str, ...] = ()) -> str:
-    """The text of shader ``name`` with ``#define`` lines inserted after its ``#version`` line."""
-    text = resources.files("arboretum_client.render").joinpath("shaders", name).read_text()
+    """The text of shader ``name``, includes expanded, with ``#define`` lines inserted after its
+    ``#version`` line."""
+    text = expand_includes(_read(name), (name,))
     head, _, rest = text.partition("\n")
     return "\n".join([head, *(f"#define {d}" for d in defines), rest])
+
+
+def expand_includes(text: str, chain: tuple[str, ...] = ()) -> str:
+    """``text`` with every ``//#include NAME`` line replaced by the (expanded) text of ``shaders/NAME``;
+    ``chain`` names the files being expanded, to refuse an include cycle."""
+    lines = []
+    for line in text.splitlines():
+        if not line.startswith(INCLUDE):
+            lines.append(line)
+            continue
+        name = line[len(INCLUDE):].strip()
+        if name in chain:
+            raise ValueError(f"shader include cycle: {' -> '.join([*chain, name])}")
+        lines.append(expand_includes(_read(name), (*chain, name)).rstrip("\n"))
+    return "\n".join(lines) + "\n"
+
+
+def _read(name: str) -> str:
+    return resources.files("arboretum_client.render").joinpath("shaders", name).read_text()
 
 
 def build_program(ctx: moderngl.Context, name: str, pick: bool = False) -> moderngl.Program:

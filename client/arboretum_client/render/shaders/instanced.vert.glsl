@@ -1,11 +1,9 @@
 #version 330 core
 // One mesh drawn N times: per-instance model matrix ('16f/i'), colour and pick id.
-uniform mat4 u_view_proj;
-in vec3 in_pos;
+//#include transform.glsl
 in vec3 in_normal;
 in mat4 in_model;
 in vec3 in_icolor;
-in int in_id;
 out vec3 v_pos;
 out vec3 v_normal;
 out vec4 v_color;

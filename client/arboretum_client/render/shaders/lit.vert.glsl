@@ -1,10 +1,8 @@
 #version 330 core
 // Meshes and tubes: per-vertex position, normal, colour and pick id (world frame).
-uniform mat4 u_view_proj;
-in vec3 in_pos;
+//#include transform.glsl
 in vec3 in_normal;
 in vec4 in_color;
-in int in_id;
 out vec3 v_pos;
 out vec3 v_normal;
 out vec4 v_color;
@@ -14,5 +12,5 @@ void main() {
     v_normal = in_normal;
     v_color = in_color;
     v_id = in_id;
-    gl_Position = u_view_proj * vec4(in_pos, 1.0);
+    gl_Position = clip_from_world(in_pos);
 }
