@@ -86,9 +86,20 @@ def _kernel_rows() -> list[Row]:
         return out
 
     assert chi_square(np.eye(3), np.eye(3)).shape == (3, 3)
+    rows.append(_smooth_row(rng))
     v, n = median_time(vectorised, runs=5), median_time(naive, runs=1, warmup=0)
     rows.append(Row("shape-context costs, 40 x 8 branch pairs", v, runs=5, baseline="pair-by-pair loops", ratio=v / n))
     return rows
+
+
+def _smooth_row(rng: np.random.Generator) -> Row:
+    """Smoothing 48 branches of 60 vertices at once against one call per branch."""
+    from arboretum_server.decompose.smooth import smooth_polylines
+
+    segs = list(np.cumsum(rng.normal(0, 0.01, (48, 60, 3)), axis=1))
+    v = median_time(lambda: smooth_polylines(segs), runs=7)
+    n = median_time(lambda: [smooth_polylines([s]) for s in segs], runs=3)
+    return Row("smooth 48 branches x 60 vertices (all at once)", v, runs=7, baseline="one call per branch", ratio=v / n)
 
 
 def run() -> list[Row]:

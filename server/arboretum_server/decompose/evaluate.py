@@ -9,6 +9,8 @@ All distances are in the HBL's output frame; ``to_frame`` maps scan/truth coordi
 - ``counts_ok``: N_m main branches and N_l lobes exactly; ``connected``: every branch reaches branch 0
   through parents and starts on its parent's vertex.
 - ``crossings``: secondary branches with a vertex more than ``CROSS_TOL`` inside a lobe they do not feed.
+- ``main_turning`` / ``secondary_turning``: mean turning angle (radians) per interior vertex of the main /
+  secondary branches (smoothness: graph-path zig-zag turns about 0.5 rad at every vertex).
 """
 
 from __future__ import annotations
@@ -40,6 +42,8 @@ class Metrics:
     counts_ok: bool
     connected: bool
     crossings: int
+    main_turning: float
+    secondary_turning: float
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -84,12 +88,27 @@ def main_fit(hbl: HBL, true_branches: list[np.ndarray]) -> tuple[float, float]:
     return float(np.concatenate(per).mean() / h), float(max(p.mean() for p in per) / h)
 
 
+def turning_angles(polyline: np.ndarray) -> np.ndarray:
+    """(L-2,) angle (radians) between consecutive edges at each interior vertex of ``polyline`` (L, 3)."""
+    e = np.diff(polyline, axis=0)
+    n = np.linalg.norm(e, axis=1)
+    e = e[n > 1e-12] / n[n > 1e-12, None]
+    return np.arccos(np.clip((e[:-1] * e[1:]).sum(axis=1), -1.0, 1.0))
+
+
+def mean_turning(hbl: HBL, level: Level) -> float:
+    """Mean turning angle (radians) per interior vertex over the branches of ``level``."""
+    a = [turning_angles(hbl.branches[i].points) for i in hbl.by_level(level)]
+    a = np.concatenate(a) if a else np.zeros(0)
+    return float(a.mean()) if len(a) else 0.0
+
+
 def connected(hbl: HBL) -> bool:
     """True if every branch reaches branch 0 and starts at its parent's ``parent_vertex``."""
     for b in hbl.branches[1:]:
         if b.parent < 0:
             return False
-        if np.linalg.norm(b.points[0] - hbl.branches[b.parent].points[b.parent_vertex]) > 1e-6:
+        if np.linalg.norm(b.points[0] - hbl.branches[b.parent].points[b.parent_vertex]) > 1e-9 * max(hbl.height, 1.0):
             return False
     return len(hbl.branches) > 0 and hbl.branches[0].parent == -1
 
@@ -118,7 +137,8 @@ def evaluate(hbl: HBL, truth: TreeTruth, leaf_points: np.ndarray, to_frame: Call
     leaves = to_frame(np.asarray(leaf_points, dtype=np.float64).reshape(-1, 3))
     cover = float((lobe_distance(hbl, leaves) <= tol).mean()) if len(leaves) else 1.0
     nm, nl = len(hbl.by_level(Level.MAIN)), len(hbl.lobes)
-    return Metrics(fit, worst, cover, nm, nl, nm == n_main and nl == n_lobes, connected(hbl), crossings(hbl))
+    return Metrics(fit, worst, cover, nm, nl, nm == n_main and nl == n_lobes, connected(hbl), crossings(hbl),
+                   mean_turning(hbl, Level.MAIN), mean_turning(hbl, Level.SECONDARY))
 
 
 def reference_fit(hbl: HBL, starts: np.ndarray, ends: np.ndarray) -> dict[str, float]:

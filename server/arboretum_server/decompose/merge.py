@@ -70,6 +70,13 @@ class BranchSet:
     """Full polylines from the root (L, 3), used for similarity and merging."""
     owner: list[np.ndarray] = field(default_factory=list)
     """(L, 2) int: (segment, vertex) owning each vertex of ``full``."""
+    raw_full: list[np.ndarray] = field(default_factory=list)
+    """After smoothing: the unsmoothed ``full`` paths (same vertex counts). Graph paths merge against
+    these (both zig-zag through the same points); connections go to the smoothed vertices. Empty before."""
+
+    def reference(self, b: int) -> np.ndarray:
+        """The full path of branch ``b`` that candidate paths are compared with (unsmoothed if known)."""
+        return self.raw_full[b] if self.raw_full else self.full[b]
 
 
 def eq1(v_i: np.ndarray, v_j: np.ndarray, v_next: np.ndarray) -> np.ndarray:
@@ -97,9 +104,8 @@ def attach(path: np.ndarray, kept: BranchSet, opt: int, k: int, tree: cKDTree | 
     Returns the new segment (first vertex = v_i on the parent), the parent segment and its vertex.
     """
     k = int(np.clip(k, 1, len(path)))
-    ref = kept.full[opt]
-    i_ref = int((tree or cKDTree(ref)).query(path[k - 1])[1])
-    v_i = ref[i_ref]
+    i_ref = int((tree or cKDTree(kept.reference(opt))).query(path[k - 1])[1])
+    v_i = kept.full[opt][i_ref]
     seg, pv = (int(x) for x in kept.owner[opt][i_ref])
     tail = path[k:]
     if len(tail) == 0:
@@ -180,9 +186,10 @@ def merge_secondaries(paths: list[np.ndarray], mains: BranchSet, tau: float, n: 
     """Algorithm 1, step 2: (segment, parent main branch, parent vertex) for each secondary path."""
     if not paths:
         return []
-    ks = np.stack([merged_prefix(paths, f, tau) for f in mains.full], axis=1)  # (P, M)
-    hp, hm = _hists(paths, n, bins), _hists(mains.full, n, bins)
-    trees = [cKDTree(f) for f in mains.full]
+    refs = [mains.reference(b) for b in range(len(mains.full))]
+    ks = np.stack([merged_prefix(paths, f, tau) for f in refs], axis=1)  # (P, M)
+    hp, hm = _hists(paths, n, bins), _hists(refs, n, bins)
+    trees = [cKDTree(f) for f in refs]
     out = []
     for p, path in enumerate(paths):
         opt = choose_parent(ks[p], hp[p], hm)

@@ -2,8 +2,9 @@
 
 Steps (each timed in ``Decomposition.timing``): prepare (ground, downsample, root, scale) -> separate
 (leaf/wood) -> graph (kNN K=5 within r=0.05, bridged; Dijkstra from the root) -> mains (FPS endpoints,
-shortest paths, Algorithm 1 step 1) -> lobes (k-means into N_l clusters, alpha shapes) -> secondary
-(shortest paths to the lobe centres, Algorithm 1 step 2, Eq. 1) -> hbl (pipe-model radii, records).
+shortest paths, Algorithm 1 step 1, smoothing) -> lobes (bare trunk to wood, k-means into N_l clusters,
+alpha shapes) -> secondary (shortest paths to the lobe centres, Algorithm 1 step 2, Eq. 1, smoothing)
+-> hbl (pipe-model radii, records).
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.spatial import cKDTree
 
-from arboretum_library.model import LEAF
+from arboretum_library.model import LEAF, WOOD
 from arboretum_library.progress import ProgressFn, no_progress
 
 from .graph import knn_graph, shortest_paths, weighted
@@ -27,6 +28,7 @@ from .radii import trunk_radius
 from .sampling import farthest_points
 from .secondary import branch_paths, make_lobes, zones
 from .separate import separate
+from .smooth import smooth_branchset
 from .state import Decomposition, build_hbl
 
 STEPS = ("prepare", "graph", "separate", "mains", "lobes", "secondary", "hbl")
@@ -34,6 +36,8 @@ CENTRE_RADIUS = 0.02
 """Radius (0.8 m frame) of the centroid that centres branch vertices in the cloud."""
 CROWN_BASE = 0.04
 """Points below this height (0.8 m frame, 5 % of the tree) never join the foliage (buttresses, ground)."""
+BARE_TRUNK_RADII = 2.5
+"""Guessed leaf points below the crown base within this many local trunk radii of the trunk are wood."""
 
 
 class _Clock:
@@ -56,25 +60,44 @@ def main_clearance(mains, pts: np.ndarray, tau: float, tree: cKDTree) -> np.ndar
     vertex's local radius, estimated as 1.3 x the median distance of its 8 nearest cloud points
     (clipped to [0.004, tau]): thin branches keep the leaves around them, thick trunks keep their bark.
     """
-    verts = np.concatenate(mains.full)
+    verts = np.concatenate([mains.reference(b) for b in range(len(mains.full))])  # unsmoothed: on the wood
     r = np.clip(1.3 * np.median(tree.query(verts, k=8)[0], axis=1), 0.004, tau)
     d, i = cKDTree(verts).query(pts)
     return d > r[i]
 
 
+def bare_trunk(pts: np.ndarray, mains) -> np.ndarray:
+    """(N,) bool: points on the bare trunk, below the crown base (the lowest main-branch fork).
+
+    A point is on it when its nearest main-branch vertex is a trunk vertex below the crown base and it
+    lies within ``BARE_TRUNK_RADII`` times that vertex's local radius (the mean distance of the points
+    whose nearest vertex it is). The box-counting separation reads rough bark and buttresses as foliage.
+    """
+    trunk = mains.segments[0]
+    forks = [pv for p, pv in zip(mains.parents, mains.parent_vertex) if p == 0]
+    base = min(forks) if forks else len(trunk) - 1
+    verts = np.concatenate(mains.segments)
+    d, i = cKDTree(verts).query(pts)
+    n = np.bincount(i, minlength=len(verts))
+    r = np.bincount(i, weights=d, minlength=len(verts)) / np.maximum(n, 1)
+    return (i < base) & (d <= BARE_TRUNK_RADII * r[i])
+
+
 def foliage_points(labels: np.ndarray, pts: np.ndarray, off_main: np.ndarray, o: DecomposeOptions,
-                   grow: bool = True) -> tuple[np.ndarray, str]:
+                   grow: bool = True, bare: np.ndarray | None = None) -> tuple[np.ndarray, str]:
     """Indices of the points to cluster into lobes and where they came from ('leaf', 'crown', 'all').
 
     Leaf-on: the leaf points, plus (``grow``, for guessed labels) every point off the main branches
     above the lowest 5 % of the tree: leaves the heuristic missed, and the twigs among them.
-    Leaf-off trees (fewer than ``leaf_off_fraction`` leaf points) cluster that crown alone.
+    Leaf-off trees (fewer than ``leaf_off_fraction`` leaf points) cluster that crown alone. Points of the
+    ``bare`` trunk (N,) bool never join a leaf-on tree's foliage.
     """
     n_lobes = o.counts()[1]
     leaf = labels == LEAF
     crown = off_main & (pts[:, 2] > CROWN_BASE)
     if leaf.sum() >= max(4 * n_lobes, o.leaf_off_fraction * len(pts)):
-        return np.flatnonzero(leaf | crown if grow else leaf), "leaf"
+        keep = leaf | crown if grow else leaf
+        return np.flatnonzero(keep & ~bare if bare is not None else keep), "leaf"
     if crown.sum() >= 4 * n_lobes:
         return np.flatnonzero(crown), "crown"
     return np.arange(len(pts)), "all"
@@ -86,15 +109,16 @@ def centre_grid(pts: np.ndarray, r_trunk: float) -> BoxGrid:
 
 
 def main_branches(pts: np.ndarray, lab: np.ndarray, adjacency, root: int, grid: BoxGrid, tau: float,
-                  o: DecomposeOptions):
-    """Algorithm 1 step 1 on the shortest paths (leaf edges ``leaf_edge_cost`` longer) to FPS endpoints."""
+                  o: DecomposeOptions, tree: cKDTree | None = None):
+    """Algorithm 1 step 1 on the shortest paths (leaf edges ``leaf_edge_cost`` longer) to FPS endpoints,
+    then every main branch smoothed (smooth.py, ours)."""
     adj = adjacency if o.edge_power == 1.0 else adjacency.power(o.edge_power)
     _, pred = shortest_paths(weighted(adj, np.where(lab == LEAF, o.leaf_edge_cost, 1.0)), root)
     ends = farthest_points(pts, o.fps_candidates + 1, root)
     ends = ends[ends != root][: o.fps_candidates]
     paths = branch_paths([int(e) for e in ends], pred, pts, grid, o.step)
     order = select_mains(paths, o.counts()[0], tau, o.step)
-    return merge_mains(paths, order, tau, o.resample, o.sc_bins)
+    return smooth_branchset(merge_mains(paths, order, tau, o.resample, o.sc_bins), tree)
 
 
 def decompose(points: np.ndarray, options: DecomposeOptions = DecomposeOptions(),
@@ -117,10 +141,14 @@ def decompose(points: np.ndarray, options: DecomposeOptions = DecomposeOptions()
     clock.lap("graph")
     lab = prep.labels if prep.labels is not None else separate(pts, g.neighbours, o.leaf_dimension)
     clock.lap("separate")
-    mains = main_branches(pts, lab, g.adjacency, root, grid, tau, o)
+    tree = cKDTree(pts)
+    mains = main_branches(pts, lab, g.adjacency, root, grid, tau, o, tree)
     clock.lap("mains")
-    off_main = main_clearance(mains, pts, tau, cKDTree(pts))
-    fol, source = foliage_points(lab, pts, off_main, o, grow=prep.labels is None)
+    bare = bare_trunk(pts, mains) if prep.labels is None else None  # guessed labels: bare trunk is wood
+    if bare is not None:
+        lab = np.where(bare, WOOD, lab).astype(np.uint8)
+    off_main = main_clearance(mains, pts, tau, tree)
+    fol, source = foliage_points(lab, pts, off_main, o, grow=prep.labels is None, bare=bare)
     k_lab, centres = kmeans(pts[fol], o.counts()[1], rng)
     groups = [fol[k_lab == j] for j in range(len(centres))]
     zone = zones(pts, groups)

@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from arboretum_library.model import LEAF
+from arboretum_library.model import LEAF, Level
 
-from .evaluate import connected, crossings, evaluate, lobe_distance, reference_fit
+from .evaluate import connected, crossings, evaluate, lobe_distance, mean_turning, reference_fit
 from .options import SPECIES_COUNTS, DecomposeOptions
 from .pipeline import decompose
 from .toytree import toy_scan
@@ -38,6 +38,15 @@ def read_qsm(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return s, s + a * data[:, [col["length"]]], data[:, col["BranchOrder"]]
 
 
+def lobes_below_crown_base(hbl) -> tuple[float, int]:
+    """(crown base as a fraction of the height: the lowest main branch leaving the trunk, number of lobe
+    centres below it)."""
+    forks = [b.points[0, 2] for b in hbl.branches if b.level == Level.MAIN and b.parent == 0]
+    base = (min(forks) if forks else hbl.branches[0].points[-1, 2]) - hbl.root[2]
+    z = np.array([lb.centre[2] for lb in hbl.lobes]) - hbl.root[2]
+    return base / max(hbl.height, 1e-12), int((z < base).sum())
+
+
 def real_figures(scan: Path) -> dict:
     d = decompose(np.loadtxt(scan)[:, :3], DecomposeOptions())
 
@@ -47,6 +56,9 @@ def real_figures(scan: Path) -> dict:
     leaf = d.hbl.points[d.labels == LEAF]
     out = {"scan": scan.name, "time_s": round(sum(d.timing.values()), 3), **d.stats,
            "connected": connected(d.hbl), "crossings": crossings(d.hbl),
+           "main_turning": round(mean_turning(d.hbl, Level.MAIN), 4),
+           "secondary_turning": round(mean_turning(d.hbl, Level.SECONDARY), 4),
+           "crown_base": round(lobes_below_crown_base(d.hbl)[0], 3), "lobes_below_crown_base": lobes_below_crown_base(d.hbl)[1],
            "leaf_cover": round(float((lobe_distance(d.hbl, leaf) <= 0.01).mean()), 4) if len(leaf) else None}
     qsm = sorted(scan.parent.glob("*cylinders.csv"))
     if qsm:

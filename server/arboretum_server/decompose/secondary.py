@@ -9,9 +9,15 @@ more (one extra Dijkstra per offender). If even that path crosses (the only wood
 through another lobe), the secondary branch becomes a straight segment from the nearest main-branch
 vertex whose segment to the lobe centre stays clear (a deviation from the paper, which has no such
 guarantee); if none does, the crossing path is kept.
+
+Every secondary branch is smoothed (smooth.py, ours) with its connection point on the main branch and its
+tip at the lobe centre fixed; where the smoothed curve would enter a foreign lobe and the unsmoothed
+path does not, the unsmoothed path is kept, so smoothing never adds a crossing.
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 from scipy.sparse import csr_matrix
@@ -22,6 +28,7 @@ from .grid import BoxGrid
 from .lobes import lobe_hull, winding_numbers
 from .merge import BranchSet, centre_paths, merge_secondaries, resample_step
 from .options import DecomposeOptions
+from .smooth import smooth_polylines, vertex_limits
 from .state import LobeState
 
 ZONE_RADIUS = 0.015
@@ -103,6 +110,19 @@ def straight_fallback(lobes: list[LobeState], j: int, mains: BranchSet, tries: i
     return None
 
 
+def clear_smooth(lobes: list[LobeState], j: int, raw: np.ndarray, smooth: np.ndarray, tol: float,
+                 box: tuple[np.ndarray, np.ndarray], tree: cKDTree) -> np.ndarray | None:
+    """Lobe ``j``'s secondary branch kept out of foreign lobes: ``smooth`` if it stays clear, else ``raw``
+    smoothed with half the displacement limits, else ``raw``, whichever stays clear first (smoothing never
+    adds a crossing); None if even ``raw`` crosses (route again)."""
+    if not foreign(lobes, j, smooth, tol, box):
+        return smooth
+    if foreign(lobes, j, raw, tol, box):
+        return None
+    half = smooth_polylines([raw], 0.5 * np.asarray(vertex_limits([raw], tree)))[0]
+    return raw if foreign(lobes, j, half, tol, box) else half
+
+
 def _finish(seg: np.ndarray, centre: np.ndarray) -> np.ndarray:
     return seg if np.linalg.norm(seg[-1] - centre) <= 1e-9 else np.vstack([seg, centre])
 
@@ -119,14 +139,19 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
     targets = [int(g[np.argmin(np.linalg.norm(pts[g] - c, axis=1))]) for g, c in zip(groups, centres)]
     merged = merge_secondaries(branch_paths(targets, pred, pts, grid, o.step), mains, tau, o.resample, o.sc_bins)
     lobes = list(others)
-    for g, c, (seg, parent, pv) in zip(groups, centres, merged):
+    raw = [_finish(seg, c) for (seg, _, _), c in zip(merged, centres)]
+    tree = cKDTree(pts)
+    smooth = smooth_polylines(raw, vertex_limits(raw, tree))
+    for g, c, seg, (_, parent, pv) in zip(groups, centres, smooth, merged):
         verts, faces, used_alpha = lobe_hull(pts[g], o.alpha_radius)
-        lobes.append(LobeState(g, c, verts, faces, used_alpha, _finish(seg, c), parent, pv))
+        lobes.append(LobeState(g, c, verts, faces, used_alpha, seg, parent, pv))
     rerouted = 0
     box = boxes(lobes)
     for j in range(len(others), len(lobes)):
         lb = lobes[j]
-        if not foreign(lobes, j, lb.segment, o.step / 2, box):
+        seg = clear_smooth(lobes, j, raw[j - len(others)], lb.segment, o.step / 2, box, tree)
+        if seg is not None:
+            lobes[j] = replace(lb, segment=seg)
             continue
         rerouted += 1
         cost = np.where((zone >= 0) & (zone != j), FOREIGN_COST, np.where(zone == j, ZONE_COST, 1.0))
@@ -134,7 +159,9 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
         path = branch_paths([targets[j - len(others)]], p2, pts, grid, o.step)
         seg, parent, pv = merge_secondaries(path, mains, tau, o.resample, o.sc_bins)[0]
         seg = _finish(seg, lb.centre)
-        if foreign(lobes, j, seg, o.step / 2, box):
-            seg, parent, pv = straight_fallback(lobes, j, mains) or (seg, parent, pv)
+        smoothed = smooth_polylines([seg], vertex_limits([seg], tree))[0]
+        seg = clear_smooth(lobes, j, seg, smoothed, o.step / 2, box, tree)
+        if seg is None:
+            seg, parent, pv = straight_fallback(lobes, j, mains) or (smoothed, parent, pv)
         lobes[j] = LobeState(lb.members, lb.centre, lb.hull_vertices, lb.hull_faces, lb.alpha, seg, parent, pv)
     return lobes[len(others):], pred, rerouted
