@@ -94,6 +94,12 @@ def test_child_never_thicker_than_parent_and_topological_order(leaf_on):
     assert sorted(lb.branch for lb in hbl.lobes) == list(range(N_M, N_M + N_L))
 
 
+def test_every_lobe_hull_is_a_closed_manifold(leaf_on):
+    from arboretum_server.decompose.lobes import is_closed_manifold
+
+    assert all(is_closed_manifold(lb.hull_faces) for lb in leaf_on[2].hbl.lobes)
+
+
 def test_same_seed_same_result(truth):
     pts, _ = toy_scan(truth, n=8000, seed=4)
     a, b = decompose(pts, OPTS), decompose(pts, OPTS)

@@ -128,7 +128,7 @@ def _closed_and_outward(v, f):
     _, counts = np.unique(edges, axis=0, return_counts=True)
     tri = v[f]
     vol = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6
-    return bool((counts % 2 == 0).all()), vol
+    return bool((counts == 2).all()), vol
 
 
 def test_alpha_shape_is_closed_outward_and_holds_its_points(rng):
@@ -139,6 +139,30 @@ def test_alpha_shape_is_closed_outward_and_holds_its_points(rng):
     inside = winding_numbers(v, f, pts * 0.5)
     assert (inside > 0.5).mean() > 0.95
     assert (winding_numbers(v, f, np.array([[1.0, 1, 1]])) < 0.5).all()
+
+
+def test_pinched_clusters_still_give_a_closed_manifold_hull(rng):
+    """Two blobs joined by a thin neck make tetrahedra meet along single edges at the probe radius."""
+    from arboretum_server.decompose.lobes import is_closed_manifold
+
+    a = rng.normal(0, 0.012, (200, 3))
+    b = rng.normal(0, 0.012, (200, 3)) + [0.09, 0, 0]
+    neck = np.c_[np.linspace(0.02, 0.07, 12), rng.normal(0, 0.001, (12, 2))]
+    pts = np.vstack([a, b, neck])
+    v, f, _ = lobe_hull(pts, 1 / 13)
+    closed, vol = _closed_and_outward(v, f)
+    assert closed and is_closed_manifold(f) and vol > 0
+    assert (winding_numbers(v, f, pts) > 0.5).mean() > 0.9
+
+
+def test_manifold_check_rejects_pinched_and_split_meshes():
+    from arboretum_server.decompose.lobes import is_closed_manifold
+
+    tet = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    assert is_closed_manifold(tet)
+    assert not is_closed_manifold(np.vstack([tet, tet + 4]))  # two pieces
+    assert not is_closed_manifold(np.vstack([tet, tet[:, ::-1], tet]))  # edges with more than two faces
+    assert not is_closed_manifold(tet[:3])
 
 
 def test_convex_fallback_for_degenerate_clusters(rng):

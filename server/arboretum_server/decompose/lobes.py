@@ -105,11 +105,37 @@ def convex_hull(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return _compact(pts, faces)
 
 
+RADIUS_STEPS = (1.0, 1.5, 2.0, 3.0)
+"""Multiples of the probe radius tried, in order, until the alpha shape is a closed 2-manifold."""
+
+
+def is_closed_manifold(faces: np.ndarray) -> bool:
+    """True when every edge of ``faces`` (F, 3) borders exactly two triangles and they form one piece."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    if len(faces) < 4:
+        return False
+    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1).astype(np.int64)
+    _, counts = np.unique(e[:, 0] * (int(faces.max()) + 1) + e[:, 1], return_counts=True)
+    if (counts != 2).any():
+        return False
+    n = int(faces.max()) + 1
+    graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    return connected_components(graph, directed=False)[0] == 1
+
+
 def lobe_hull(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray, bool]:
-    """(vertices, faces, used_alpha): the alpha shape of ``points``, or its convex-hull fallback."""
-    shape = alpha_shape(points, radius)
-    if shape is not None and len(shape[1]) >= 4:
-        return shape[0], shape[1], True
+    """(vertices, faces, used_alpha): a closed, one-piece alpha shape of ``points``, else its convex hull.
+
+    The boundary of a union of tetrahedra is closed but can pinch (two tetrahedra meeting along an
+    edge leave it with four faces) or fall apart into islands; growing the probe radius through
+    ``RADIUS_STEPS`` usually fills such gaps before the convex hull is needed.
+    """
+    for step in RADIUS_STEPS:
+        shape = alpha_shape(points, radius * step)
+        if shape is not None and is_closed_manifold(shape[1]):
+            return shape[0], shape[1], True
     v, f = convex_hull(points)
     return v, f, False
 
