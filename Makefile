@@ -47,11 +47,11 @@ demo: install
 	$(BIN)/arboretum demo --out out
 
 lint: install
-	$(BIN)/ruff check library server client tests bench
+	$(BIN)/ruff check library server client tests bench examples
 	$(BIN)/lint-imports
 
 test: install
-	$(BIN)/ruff check library server client tests bench
+	$(BIN)/ruff check library server client tests bench examples
 	$(BIN)/lint-imports
 	$(BIN)/python -m pytest -q -p no:cacheprovider
 
