@@ -81,3 +81,28 @@ def test_branch_radii_flag(tmp_path, hbl_file, capsys):
         trunk[mode] = json.loads(capsys.readouterr().out)["trunk_radius"]
     assert trunk["hbl"] == pytest.approx(load_hbl(hbl_file).branches[0].radii[0], rel=1e-12)
     assert trunk["pipe"] != pytest.approx(trunk["hbl"], rel=1e-3)
+
+
+def test_grow_an_assembly_against_its_library(tmp_path, capsys):
+    """`arboretum grow` takes a saved Assembly with --library, as issue 5 specifies (HBL_OR_ASSEMBLY)."""
+    import json
+
+    from arboretum_library.cli import main
+    from arboretum_library.codec import save_record
+    from arboretum_library.geometry import make_transform
+    from arboretum_library.model import Assembly, Placement
+    from arboretum_library.store import Library
+    from factories import make_example
+
+    rng = np.random.default_rng(5)
+    lib = Library.open(tmp_path / "lib", create=True)
+    ids = [lib.add(make_example(rng, id=f"ex{i}", n_lobes=3)) for i in range(2)]
+    lib.close()
+    asm = Assembly(tuple(Placement(f"p{i}", e, make_transform(t=[3.0 * i, 0, 0])) for i, e in enumerate(ids)))
+    path = save_record(tmp_path / "session.npz", asm)
+    out = tmp_path / "tree.glb"
+    assert main(["grow", str(path), "--library", str(tmp_path / "lib"), "--out", str(out), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["lobes"] == 6 and out.read_bytes()[:4] == b"glTF"
+    assert main(["grow", str(path), "--out", str(out)]) == 2
+    assert "needs --library" in capsys.readouterr().err

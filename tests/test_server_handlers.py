@@ -146,7 +146,9 @@ def test_grow_and_export_run_as_jobs(server):
 
     n = struct.unpack_from("<I", m.data.tobytes(), 12)[0]
     doc = json.loads(m.data.tobytes()[20:20 + n])
-    assert len(doc["nodes"]) == m.stats["instances"] and len(doc["meshes"]) <= m.stats["types"] + 16
+    used = {node["mesh"] for node in doc["nodes"]}
+    assert len(doc["nodes"]) == m.stats["instances"] and len(used) == m.stats["types"]
+    assert max(used) < len(doc["meshes"])  # one mesh per module of the set, whether placed or not
 
 
 def test_refinement_flow(server):

@@ -152,3 +152,25 @@ def _attach(s: HBL, a_main: Branch, a_index: int, vertex_a: int, vertex_b: int, 
                 pv = int(np.argmin(np.linalg.norm(a_main.points - main.points[pv], axis=1)))
         out.append(Branch(b.points, b.radii, parent if b.parent >= 0 else -1, pv, b.level))
     return lambda j: j + base if j >= 0 else -1
+
+
+def load_structure(path: str, library: str | None) -> HBL:
+    """An HBL from a record .npz holding an HBL, or an Assembly resolved against the example ``library``.
+
+    What the commands that consume a tree (``grow``, ``modules``) accept as input.
+    """
+    from arboretum_library.codec import load_record, record_kind
+    from arboretum_library.store import Library
+
+    kind = record_kind(path)
+    if kind == "HBL":
+        return load_record(path, HBL)
+    if kind != "Assembly":
+        raise InputError(f"{path}: holds a {kind!r} record; expected an HBL or an Assembly")
+    if library is None:
+        raise InputError(f"{path}: an Assembly record needs --library LIB (the examples it places)")
+    lib = Library.open(library, readonly=True)
+    try:
+        return assembly_to_hbl(load_record(path, Assembly), lib.get)
+    finally:
+        lib.close()

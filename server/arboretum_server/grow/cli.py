@@ -18,8 +18,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Space colonization in every lobe (VRTree Eq. 2), pipe-model radii, leaf cards, "
         "then a mesh (.glb with textures, .obj + .mtl, or .ply) and optionally the skeleton.",
     )
-    p.add_argument("hbl", metavar="HBL_NPZ",
-                   help="an HBL .npz (codec.save_record, e.g. from 'arboretum decompose --save-hbl')")
+    p.add_argument("hbl", metavar="HBL_OR_ASSEMBLY",
+                   help="a record .npz: an HBL (e.g. from 'arboretum decompose --save-hbl') or an Assembly "
+                   "(e.g. a session saved by 'arboretum assemble', with --library)")
+    p.add_argument("--library", metavar="LIB", default=None,
+                   help="the example library an Assembly record places examples from")
     p.add_argument("--out", required=True, help="mesh file to write: .glb, .obj or .ply")
     p.add_argument("--density", type=float, default=1.0, help="twig density multiplier (default 1.0)")
     p.add_argument("--leaf-density", type=float, default=1.0, help="leaf cards per tip node (default 1.0)")
@@ -59,16 +62,16 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from arboretum_library.progress import StatusLine
+    from arboretum_server.assembly.world import load_structure
     from arboretum_server.mesh.lod import LodOptions
     from arboretum_server.mesh.scene import tree_mesh
 
-    from .io import load_hbl
     from .options import GrowOptions
     from .tree import grow_tree
     from .writers import write_mesh, write_skeleton
 
     out, skel = _check_paths(args)
-    hbl = load_hbl(args.hbl)
+    hbl = load_structure(args.hbl, args.library)
     t0 = time.perf_counter()
     opts = GrowOptions(density=args.density, leaf_density=args.leaf_density, step=args.step,
                        leaf_size=args.leaf_size, branch_radii=args.branch_radii)
@@ -82,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     t3 = time.perf_counter()
     data = {
         "out": str(out), "bytes": size, "skeleton": str(skel) if skel else None,
-        "seed": args.seed,
+        "seed": args.seed, "branches": len(hbl.branches), "lobes": len(hbl.lobes),
         "lod": args.lod, "step": tree.step, "iterations": tree.iterations, "nodes": len(tree.positions),
         "twig_nodes": tree.twig_count, "leaves": int(len(mesh.leaves.faces) // 2),
         "bark_triangles": int(len(mesh.bark.faces)), "triangles": mesh.triangles,

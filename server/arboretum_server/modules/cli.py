@@ -40,30 +40,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def load_structure(path: str, library: str | None):
-    """An HBL from a record .npz holding an HBL, or an Assembly resolved against ``library``."""
-    from arboretum_library.codec import load_record, record_kind
-    from arboretum_library.model import HBL, Assembly
-
-    kind = record_kind(path)
-    if kind == "HBL":
-        return load_record(path, HBL)
-    if kind != "Assembly":
-        raise InputError(f"{path}: holds a {kind!r} record; expected an HBL or an Assembly")
-    if library is None:
-        raise InputError(f"{path}: an Assembly record needs --library LIB (the examples it places)")
-    from arboretum_library.store import Library
-    from arboretum_server.assembly.world import assembly_to_hbl
-
-    lib = Library.open(library, readonly=True)
-    try:
-        return assembly_to_hbl(load_record(path, Assembly), lib.get)
-    finally:
-        close = getattr(lib, "close", None)
-        if close is not None:
-            close()
-
-
 def _crown_mesh(path: str):
     import numpy as np
 
@@ -111,6 +87,7 @@ def _converted(args: argparse.Namespace):
     import numpy as np
 
     from arboretum_library.progress import StatusLine, no_progress
+    from arboretum_server.assembly.world import load_structure
     from arboretum_server.grow.options import GrowOptions
     from arboretum_server.grow.tree import grow_tree
 
@@ -142,6 +119,8 @@ def _grown(args: argparse.Namespace):
         lo = meshes[0][0].min(axis=0)
         root = np.r_[(lo + meshes[0][0].max(axis=0))[:2] / 2, min(lo[2], 0.0)]
     else:
+        from arboretum_server.assembly.world import load_structure
+
         hbl = load_structure(args.assembly, args.library)
         if not hbl.lobes:
             raise InputError(f"--assembly {args.assembly}: has no lobes (no crown to grow in)")
