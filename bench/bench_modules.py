@@ -22,9 +22,10 @@ def _scenes():
 
     return {
         "small (tetrahedron crown)": ([tetrahedron_mesh([0, 0, 4.6], 6.5)], np.eye(4), {}, 0.25),
-        "large (sphere r=8 m, trunk x2, d_k=1/20)": (
-            [sphere_mesh([0, 0, 11], 8)],
-            make_transform(scale=2.0),
+        # crown 18 m across = 18 lengths of a median branch module (1 m at s = 1); trunk 10 m, top at z = 10
+        "large (sphere r=9 m, trunk x3, d_k=1/20)": (
+            [sphere_mesh([0, 0, 12], 9)],
+            make_transform(scale=3.0),
             {"kill_fraction": 0.05},
             1.2,
         ),
@@ -98,7 +99,7 @@ def run() -> list[Row]:
     modules = make_default_module_set(np.random.default_rng(7))
     rows = [
         Row(
-            "default module set: sweep + Appendix A skeletons (16 modules)",
+            "default module set: sweep + Appendix A skeletons (25 modules)",
             time.perf_counter() - t0,
         )
     ]

@@ -54,7 +54,7 @@ class _Pool:
         return _Pool(BranchPoints(*cat), np.concatenate([self.owner, owner]))
 
 
-def _skeleton_samples(modules: ModuleSet, idx: np.ndarray, n: int = 24) -> np.ndarray:
+def _skeleton_samples(modules: ModuleSet, idx: np.ndarray, n: int = 30) -> np.ndarray:
     """(M, S, 3) skeleton samples per branch module: every spline resampled, padded to one length."""
     out = []
     for i in idx:
@@ -200,9 +200,7 @@ def grow_modular_tree(
         first = len(inst["module"])
         grown = _record(inst, pl, pool, pm.branches, pm.base_radius, it + 1)
         pool = _next_pool(pool, pl.branch_point, grown, first, pm, crown, o, rng)
-        new_sk = np.concatenate(
-            [modules.modules[m].skeleton.points @ T[:3, :3].T + T[:3, 3] for m, T in grown]
-        )
+        new_sk, _ = _placed([modules.modules[m].skeleton.points for m, _ in grown], grown)
         live = np.flatnonzero(alive)
         alive[live] = _far_from(attract[live], new_sk, d_kill)
     return _finish(inst, modules, crown, o, attract, alive, iterations, tol)
@@ -233,19 +231,31 @@ def _next_pool(
     used = np.zeros(len(pool.owner), dtype=bool)
     used[used_ids] = True
     pool = pool.take(~used)
-    bps = [place_branch_points(pm.branch_points[m], T) for m, T in grown]
-    new = BranchPoints(
-        *(
-            np.concatenate([getattr(b, f) for b in bps])
-            for f in ("position", "normal", "tangent", "radius")
-        )
-    )
-    owner = np.concatenate([np.full(len(b.radius), first + k) for k, b in enumerate(bps)])
+    local = [pm.branch_points[m] for m, _ in grown]
+    position, k = _placed([b.position for b in local], grown)
+    scale = np.cbrt(np.linalg.det(np.stack([T[:3, :3] for _, T in grown])))
+    normal, _ = _placed([b.normal for b in local], grown, 1.0 / scale)
+    tangent, _ = _placed([b.tangent for b in local], grown, 1.0 / scale)
+    new = BranchPoints(position, normal, tangent, np.concatenate([b.radius for b in local]) * scale[k])
+    owner = first + k
     keep = _new_points(new, crown, False, o.cull_fraction, rng)
     return pool.add(
         BranchPoints(new.position[keep], new.normal[keep], new.tangent[keep], new.radius[keep]),
         owner[keep],
     )
+
+
+def _placed(local: list, grown: list, factor: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of ``local[k]`` (n_k, 3) moved by the k-th transform of ``grown`` [(module, T (4, 4))], all at once.
+
+    Positions (``factor`` None) get the whole similarity; directions get the linear part times ``factor``
+    (K,) (1 / scale: a rotation). Returns the stacked (sum n_k, 3) rows and the (sum n_k,) instance k.
+    """
+    T = np.stack([t for _, t in grown])
+    k = np.repeat(np.arange(len(local)), [len(a) for a in local])
+    A = T[:, :3, :3] if factor is None else T[:, :3, :3] * factor[:, None, None]
+    out = np.einsum("nij,nj->ni", A[k], np.concatenate(local))
+    return (out + T[k, :3, 3] if factor is None else out), k
 
 
 def _far_from(points: np.ndarray, branch: np.ndarray, d_kill: float) -> np.ndarray:

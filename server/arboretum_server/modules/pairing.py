@@ -30,18 +30,26 @@ def choose_modules(
     Returns the best module (...,), its scale s(M_b) (...,) and a feasibility mask (...,): a module is
     feasible when r_p / r_c >= s_l, so the clamp keeps both the scale and the radius constraint.
     """
-    ratio = parent_radius[..., None] / base_radius
+    if gather is None:
+        gather, parent_radius = np.arange(parent_radius.size).reshape(target.shape), parent_radius.ravel()
+    ratio = parent_radius[None, :] / base_radius[:, None]  # (M, Nb): one contiguous row per module
     # infeasible modules get a huge negative cap: their clamped scale, and so their error, is enormous
     cap = np.where(ratio >= s_lo, np.minimum(ratio, s_hi), -1e9).astype(np.float32)
-    if gather is not None:
-        cap = cap[gather]
-    s = target[..., None].astype(np.float32) * (1.0 / size).astype(np.float32)
-    np.maximum(s, np.float32(s_lo), out=s)
-    np.minimum(s, cap, out=s)
-    err = np.abs(s - np.float32(1.0))
-    best = np.argmin(err, axis=-1)[..., None]
-    pick = np.take_along_axis(s, best, axis=-1)[..., 0].astype(np.float64)
-    return best[..., 0], pick, np.take_along_axis(err, best, axis=-1)[..., 0] < 1e8
+    t32, inv = target.astype(np.float32), (1.0 / size).astype(np.float32)
+    best = np.zeros(target.shape, dtype=np.int64)
+    best_err = np.full(target.shape, np.inf, dtype=np.float32)
+    err = np.zeros(target.shape, dtype=np.float32)
+    for m in range(len(size)):  # running argmin over modules (ties keep the first, as argmin does)
+        np.multiply(t32, inv[m], out=err)
+        np.maximum(err, np.float32(s_lo), out=err)
+        np.minimum(err, cap[m][gather], out=err)
+        err -= np.float32(1.0)
+        np.abs(err, out=err)
+        best[err < best_err] = m
+        np.minimum(best_err, err, out=best_err)
+    cap_best = cap[best, gather]
+    pick = np.minimum(np.maximum(t32 * inv[best], np.float32(s_lo)), cap_best)
+    return best, pick.astype(np.float64), cap_best >= s_lo
 
 
 def pair_cost(dt: np.ndarray, length: np.ndarray, feasible: np.ndarray, C: float) -> np.ndarray:
