@@ -66,6 +66,17 @@ def _serve(tmp: Path) -> tuple[subprocess.Popen, str]:
     return proc, proc.stdout.readline().split()[-1]
 
 
+def _wait_ready(remote, limit_s: float = 120.0) -> None:
+    """Steady state: wait until the server has imported its heavy modules (Pong.ready)."""
+    from arboretum_library import protocol as P
+
+    t0 = time.perf_counter()
+    while not remote.call(P.Ping()).ready:
+        if time.perf_counter() - t0 > limit_s:
+            raise RuntimeError("server did not finish warming up")
+        time.sleep(0.2)
+
+
 def _times(fn, n: int, after=None) -> list[float]:
     out = []
     for i in range(n):
@@ -101,6 +112,7 @@ def run() -> list[Row]:
         proc, endpoint = _serve(tmp)
         try:
             with Remote(endpoint, timeout=60) as r:
+                _wait_ready(r)
                 sid = r.new_session().session
                 for i in range(6):
                     r.add_example(sid, f"ex-{i}", make_transform(t=[i * 0.5, 0, 0]))

@@ -57,6 +57,12 @@ def test_handshake_and_version_error_names_both_versions(server):
     assert "99" in e.message and f"server speaks {P.PROTOCOL_VERSION}" in e.message
 
 
+def test_ping_says_whether_the_server_has_warmed_up(server):
+    assert ok(server, P.Ping()).ready is True
+    server.ctx.warming = True
+    assert ok(server, P.Ping()).ready is False
+
+
 def test_library_operations(server):
     assert [e["id"] for e in ok(server, P.LibraryList()).entries] == ["ex-0", "ex-1", "ex-2"]
     assert [e["id"] for e in ok(server, P.LibraryList(tags=("curved",))).entries] == ["ex-2"]

@@ -106,7 +106,8 @@ class Hello(Request):
 
 @message("pong")
 class Pong(Reply):
-    pass
+    ready: bool = arg(True, doc="False while the server is still importing its heavy modules after start-up "
+                      "(the first seconds; replies are slower until then)")
 
 
 @message("ping", Pong)

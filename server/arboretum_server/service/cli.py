@@ -90,7 +90,13 @@ def run(args: argparse.Namespace) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: server.stop_event.set())
     print(f"listening on {server.endpoint}", flush=True)
-    threading.Thread(target=warm_up, name="warm-up", daemon=True).start()  # imports while serving
+    def warm() -> None:  # imports while serving; Ping answers ready=False until done
+        warm_up()
+        ctx.warming = False
+        logging.getLogger(__name__).info("ready: handler modules imported")
+
+    ctx.warming = True
+    threading.Thread(target=warm, name="warm-up", daemon=True).start()
     try:
         server.serve_forever()
     finally:

@@ -25,6 +25,8 @@ class Context:
     recombine: RecombineOptions = field(default_factory=RecombineOptions)
     operations: tuple[str, ...] = ()
     """Request types the dispatcher handles (for the handshake)."""
+    warming: bool = False
+    """True while the warm-up thread imports the heavy modules (set and cleared by ``arboretum serve``)."""
     _library: Library | None = None
     _examples: OrderedDict = field(default_factory=OrderedDict)
 

@@ -24,7 +24,7 @@ def hello(ctx: Context, req: P.Hello) -> P.Welcome:
 
 
 def ping(ctx: Context, req: P.Ping) -> P.Pong:
-    return P.Pong()
+    return P.Pong(ready=not ctx.warming)
 
 
 def cancel(ctx: Context, req: P.Cancel) -> P.Ack:
