@@ -204,3 +204,13 @@ def test_farthest_points_on_clouds_smaller_than_the_kd_tree():
     idx = farthest_points(pts, 20, 0)
     assert len(idx) == 20 and len(set(idx.tolist())) == 20
     assert idx.min() >= 0 and idx.max() < 60
+
+
+def test_compiled_winding_numbers_equal_the_numpy_formula(rng):
+    from arboretum_server.decompose.lobes import winding_numbers_reference
+
+    v, f, _ = lobe_hull(rng.normal(0, 0.03, (200, 3)), 1 / 13)
+    q = rng.normal(0, 0.05, (300, 3))
+    fast, ref = winding_numbers(v, f, q), winding_numbers_reference(v, f, q)
+    assert np.allclose(fast, ref, atol=1e-9)
+    assert ((fast > 0.5) == (ref > 0.5)).all() and 0 < (fast > 0.5).sum() < len(q)
