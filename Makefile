@@ -61,6 +61,7 @@ test-all: install
 
 bench: install
 	$(BIN)/python -m bench
+	$(BIN)/python -m bench.report --update
 
 clean:
 	rm -rf $(VENV) out .pytest_cache
