@@ -99,3 +99,32 @@ def test_synth_harmonic_model(tmp_path, capsys):
     tr = load_truth(truth)
     assert pts.shape == (2500, 3) and tr.model == "harmonic" and summary["nodes"] == tr.node_count
     assert set(np.unique(bids)) <= set(np.unique(tr.branch_id).tolist())
+
+
+def test_mesh_of_the_true_tree(tmp_path, capsys):
+    """`--mesh` writes the truth as tubes and leaf cards: counts follow the truth, the GLB validates."""
+    from arboretum_library.export.gltf_read import read_glb
+    from arboretum_library.truth import load_truth
+    from arboretum_server.mesh.scene import truth_mesh
+    from test_export_gltf import validate
+
+    args = ["synth", "--model", "harmonic", "--species", "ginkgo", "--seed", "2", "--points", "2000",
+            "--out", str(tmp_path / "s.ply"), "--truth", str(tmp_path / "t.npz"), "--mesh", str(tmp_path / "m.glb")]
+    assert main([*args, "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    truth = load_truth(tmp_path / "t.npz")
+    mesh = truth_mesh(truth)
+    assert len(mesh.leaves.faces) == 2 * truth.leaf_count  # one two-triangle card per leaf
+    assert summary["mesh_triangles"] == mesh.triangles
+    assert np.allclose(mesh.leaves.positions.reshape(-1, 4, 3).mean(axis=1), truth.leaf_positions)
+    # every tube is closed: with the UV-seam duplicates welded, each edge borders exactly two triangles
+    _, weld = np.unique(np.round(mesh.tubes.positions, 9), axis=0, return_inverse=True)
+    for c in np.unique(mesh.tubes.face_chain)[:50]:
+        f = weld.reshape(-1)[mesh.tubes.faces[mesh.tubes.face_chain == c]]
+        e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+        assert (np.unique(e, axis=0, return_counts=True)[1] == 2).all()
+    report = validate(tmp_path / "m.glb")
+    assert report["issues"]["numErrors"] == 0
+    assert sum(len(m.faces) for m in read_glb(tmp_path / "m.glb")) == mesh.triangles
+    assert main([*args[:-1], str(tmp_path / "m.stl")]) == 2
+    assert "--mesh" in capsys.readouterr().err

@@ -8,7 +8,8 @@ import numpy as np
 
 from arboretum_library.assets import asset_path
 from arboretum_library.export.parts import Material, MeshPart
-from arboretum_server.grow.skeleton import GrownTree
+from arboretum_library.truth import TreeTruth
+from arboretum_server.grow.skeleton import GrownTree, Leaves
 
 from .cards import card_mesh
 from .chains import split_chains
@@ -50,10 +51,30 @@ def tree_materials(textures: bool = True) -> list[Material]:
 
 def tree_mesh(tree: GrownTree, lod: LodOptions = LodOptions()) -> TreeMesh:
     """Tubes around every chain of ``tree`` and its leaf cards, at ``lod``."""
-    chains = thin_chains(split_chains(tree.parents, tree.radii), lod.chain_stride)
-    tubes = sweep(tree.positions, tree.radii, chains, lod.tube_sides)
+    return skeleton_mesh(tree.positions, tree.parents, tree.radii, tree.leaves, lod)
+
+
+def truth_mesh(truth: TreeTruth, lod: LodOptions = LodOptions()) -> TreeMesh:
+    """The mesh of a synthetic tree's ground truth: tubes around its skeleton, a card per leaf.
+
+    A leaf's quaternion turns the card frame to the world (``truth`` module docs): card +X (stem to
+    tip) gives the card's axis, card +Z its normal.
+    """
+    w, x, y, z = np.asarray(truth.leaf_wxyz, dtype=np.float64).reshape(-1, 4).T
+    axes = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)], axis=1)
+    normals = np.stack([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)], axis=1)
+    leaves = Leaves(np.asarray(truth.leaf_positions, np.float64), normals, axes,
+                    np.asarray(truth.leaf_sizes, np.float64), np.zeros(len(w), np.int64))
+    return skeleton_mesh(truth.positions, truth.parent, truth.radii, leaves, lod)
+
+
+def skeleton_mesh(positions: np.ndarray, parents: np.ndarray, radii: np.ndarray, leaves: Leaves,
+                  lod: LodOptions = LodOptions()) -> TreeMesh:
+    """Tubes around every chain of a skeleton (``positions`` (N, 3), ``parents`` (N,), ``radii`` (N,))
+    and ``leaves`` as cards, at ``lod``."""
+    chains = thin_chains(split_chains(parents, radii), lod.chain_stride)
+    tubes = sweep(positions, radii, chains, lod.tube_sides)
     bark = MeshPart("bark", tubes.positions, tubes.faces, tubes.normals, tubes.uv, BARK)
-    leaves = tree.leaves
     if lod.level > 0 and len(leaves.sizes):
         leaves = cluster_leaves(leaves, float(np.median(leaves.sizes)) * (1 << lod.level))
     cards = card_mesh(leaves.centres, leaves.normals, leaves.axes, leaves.sizes, "leaves", LEAF)

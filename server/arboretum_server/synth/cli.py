@@ -39,6 +39,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", type=Path, required=True, help="scan to write (.ply, .xyz or .npy)")
     p.add_argument("--truth", type=Path, help="ground truth to write (.npz)")
+    p.add_argument("--mesh", type=Path, help="the true tree as a mesh: .glb (textured), .obj or .ply")
+    p.add_argument("--lod", type=int, default=0, help="level of detail of --mesh: 0 full, 1, 2, ... coarser")
     p.add_argument("--leaf-off", action="store_true", help="scan without leaves")
     p.add_argument("--missing-sector", type=float, default=0.0, metavar="DEG",
                    help="drop the points in an azimuth wedge this many degrees wide")  # fmt: skip
@@ -66,7 +68,9 @@ def _check(args: argparse.Namespace) -> None:
         raise InputError(f"--noise: must be >= 0, got {args.noise}")
     if args.nodes is not None and args.nodes < 500:
         raise InputError(f"--nodes: must be >= 500, got {args.nodes}")
-    for flag, path in (("--out", args.out), ("--truth", args.truth)):
+    if args.mesh is not None and args.mesh.suffix.lower() not in (".glb", ".obj", ".ply"):
+        raise InputError(f"--mesh {args.mesh}: write .glb, .obj or .ply")
+    for flag, path in (("--out", args.out), ("--truth", args.truth), ("--mesh", args.mesh)):
         if path is not None and not path.parent.resolve().is_dir():
             raise InputError(f"{flag} {path}: folder '{path.parent}' does not exist")
     if args.truth is not None and args.truth.suffix.lower() != ".npz":
@@ -116,6 +120,15 @@ def run(args: argparse.Namespace) -> int:
     write_points(args.out, cloud.points, labels=cloud.labels, branch_ids=cloud.branch_ids)
     if args.truth is not None:
         save_truth(args.truth, truth)
+    triangles = None
+    if args.mesh is not None:
+        from arboretum_server.grow.writers import write_mesh
+        from arboretum_server.mesh.lod import LodOptions
+        from arboretum_server.mesh.scene import truth_mesh
+
+        mesh = truth_mesh(truth, LodOptions(level=args.lod))
+        write_mesh(args.mesh, mesh)
+        triangles = mesh.triangles
     summary = {
         "model": args.model, "species": args.species, "seed": args.seed,
         "nodes": truth.node_count, "branches": truth.branch_count, "leaves": truth.leaf_count,
@@ -123,6 +136,7 @@ def run(args: argparse.Namespace) -> int:
         "points": len(cloud.points), "wood_points": int((cloud.labels == 0).sum()),
         "leaf_points": int((cloud.labels == 1).sum()), "out": str(args.out),
         "truth": None if args.truth is None else str(args.truth),
+        "mesh": None if args.mesh is None else str(args.mesh), "mesh_triangles": triangles,
         "seconds": {"grow": round(t1 - t0, 3), "scan": round(t2 - t1, 3)},
     }  # fmt: skip
     text = (f"{args.model}/{args.species} seed {args.seed}: {truth.node_count} nodes, {truth.branch_count} branches, "
