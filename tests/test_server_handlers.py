@@ -105,7 +105,7 @@ def test_user_mistakes_become_error_replies(server):
     err(server, P.SessionHBL(session=sid), "bad_input", "empty")
     err(server, P.Grow(session=sid, options={"densty": 1}), "bad_input", "densty")
     err(server, P.RemoveLobe(session=sid, lobe=0), "bad_input", "refine.open")
-    err(server, P.ExportModules(session=sid, format="usd"), "bad_input", "USD")
+    err(server, P.ExportModules(session=sid, format="fbx"), "bad_input", "usdc")
     server.handlers.pop(P.ExportModules)
     err(server, P.ExportModules(session=sid), "unavailable")
     err(server, P.ExportMesh(session=sid, format="fbx"), "bad_input", "fbx")
@@ -152,6 +152,10 @@ def test_grow_and_export_run_as_jobs(server):
 
     n = struct.unpack_from("<I", m.data.tobytes(), 12)[0]
     doc = json.loads(m.data.tobytes()[20:20 + n])
+    u = ok(server, P.ExportModules(session=sid, format="usda"))
+    text = u.data.tobytes().decode()
+    assert u.name == "tree-modules.usda" and text.startswith("#usda") and "PointInstancer" in text
+    assert u.stats["instances"] == m.stats["instances"]  # same seed, same modular tree
     used = {node["mesh"] for node in doc["nodes"]}
     assert len(doc["nodes"]) == m.stats["instances"] and len(used) == m.stats["types"]
     assert max(used) < len(doc["meshes"])  # one mesh per module of the set, whether placed or not

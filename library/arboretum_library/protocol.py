@@ -437,10 +437,10 @@ class ExportMesh(SessionRequest):
 
 @message("export.modules", ExportFile, long=True)
 class ExportModules(SessionRequest):
-    """Grow modules (Takikawa et al. 2025) in the crown of the assembled tree's lobes; a GLB of plain
-    nodes sharing one mesh per module type."""
+    """Grow modules (Takikawa et al. 2025) in the crown of the assembled tree's lobes, and write them."""
 
-    format: str = arg(default="glb", doc="glb (USD is not written yet)")
+    format: str = arg(default="glb", doc="glb (plain nodes sharing one mesh per module type), glb-instanced "
+                      "(EXT_mesh_gpu_instancing), usdc or usda (UsdGeom.PointInstancer)")
     seed: int = arg(default=0, doc="random seed")
     options: dict = arg(default={}, doc="ModularTreeOptions fields")
 

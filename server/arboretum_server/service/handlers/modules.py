@@ -1,6 +1,8 @@
 """Export as modules (Takikawa et al. 2025, ``arboretum_server.modules``) as a job: the assembled tree's
 lobe hulls make the crown, the default module set grows in it, and the placed module instances are
-written as a GLB of plain nodes sharing one mesh per module type (every importer reads those)."""
+written by ``modules.export`` in the format asked for: ``glb`` (plain nodes sharing one mesh per module
+type: every importer reads those), ``glb-instanced`` (EXT_mesh_gpu_instancing), ``usdc`` or ``usda``
+(a UsdGeom.PointInstancer)."""
 
 from __future__ import annotations
 
@@ -15,7 +17,8 @@ from arboretum_server.service.context import Context
 from arboretum_server.service.handlers.grow import session_hbl
 from arboretum_server.service.jobs import Job
 
-FORMATS = ("glb",)
+FORMATS = {"glb": (".glb", True), "glb-instanced": (".glb", False), "usdc": (".usdc", False), "usda": (".usda", False)}
+"""Request format -> (file suffix, plain nodes)."""
 
 
 def module_options(options: dict):
@@ -31,11 +34,13 @@ def module_options(options: dict):
         raise InputError(f"module options: {exc}") from None
 
 
-def export_modules_job(progress, hbl: HBL, seed: int, options: dict) -> dict:
-    """Worker: grow a modular tree in the crown of ``hbl``'s lobes; the GLB's name, bytes and counts."""
-    from arboretum_library.export.gltf import glb_bytes
-    from arboretum_library.export.parts import Material, MeshPart, Node
+def export_modules_job(progress, hbl: HBL, seed: int, options: dict, format: str = "glb") -> dict:
+    """Worker: grow a modular tree in the crown of ``hbl``'s lobes; the file's name, bytes and counts."""
+    import tempfile
+    from pathlib import Path
+
     from arboretum_server.modules.crown import crown_from_meshes
+    from arboretum_server.modules.export import from_modular_tree, write_instances
     from arboretum_server.modules.grow import grow_modular_tree
     from arboretum_server.modules.procedural import make_default_module_set
 
@@ -50,20 +55,23 @@ def export_modules_job(progress, hbl: HBL, seed: int, options: dict) -> dict:
     T[:3, 3] = hbl.root
     tree = grow_modular_tree(modules, crown, module_options(options), rng, T_world_trunk=T)
     progress(2, 3, "writing")
-    parts = [MeshPart(m.name, m.vertices, m.faces) for m in modules.modules]
-    nodes = [Node(int(k), T_k, f"module-{i}") for i, (k, T_k) in enumerate(zip(tree.module, tree.T_world_module))]
-    data = glb_bytes(parts, [Material("bark", (0.35, 0.25, 0.17, 1.0))], nodes)
+    suffix, plain = FORMATS[format]
+    name = f"tree-modules{suffix}"
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / name
+        write_instances(path, from_modular_tree(tree, modules), plain=plain)
+        data = path.read_bytes()
     progress(3, 3, "done")
     stats = {"instances": int(len(tree.module)), "types": int(tree.stats.types_used),
              "reached_fraction": float(tree.stats.reached_fraction)}
-    return {"name": "tree-modules.glb", "data": np.frombuffer(data, np.uint8), "stats": stats}
+    return {"name": name, "data": np.frombuffer(data, np.uint8), "stats": stats}
 
 
 def export_modules(ctx: Context, req: P.ExportModules) -> Job:
     if req.format not in FORMATS:
-        raise InputError(f"export modules format {req.format!r}: use one of {', '.join(FORMATS)} (USD is not written yet)")
+        raise InputError(f"export modules format {req.format!r}: use one of {', '.join(FORMATS)}")
     module_options(req.options)
-    kwargs = {"hbl": session_hbl(ctx, req.session), "seed": req.seed, "options": req.options}
+    kwargs = {"hbl": session_hbl(ctx, req.session), "seed": req.seed, "options": req.options, "format": req.format}
     return Job(f"{__name__}:export_modules_job", kwargs, lambda r: P.ExportFile(**r))
 
 
