@@ -15,6 +15,7 @@ Per-frame Python work is O(draw calls): nothing iterates over vertices unless so
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -26,6 +27,7 @@ from .input.desktop import DesktopInput, Key, MouseButton, MouseMove
 from .input.hands import HAND_COLORS, LEFT, RIGHT, SIDES, Hands, HandSample
 from .net import Worker
 from .overlay import overlay_key, overlay_scene
+from .scene import Billboard
 from .session_port import SessionPort
 from .tools.actions import Actions
 from .tools.interaction import Interaction
@@ -38,6 +40,34 @@ PANEL_PX = 260
 """Width of the side panel in pixels."""
 TOUCH_RADIUS = 0.06
 """Metres: a VR touch ball this close to an item touches it."""
+REFERENCE_BEHIND = 0.6
+"""How far behind the origin (+Y, away from the front camera) a reference image stands, in units of its height."""
+
+
+def load_reference(path: str | Path) -> np.ndarray:
+    """A PNG/JPEG (anything pillow reads) as an (H, W, 4) uint8 RGBA array, top row first."""
+    from PIL import Image, UnidentifiedImageError
+
+    from arboretum_library.errors import InputError
+
+    try:
+        with Image.open(path) as im:
+            return np.asarray(im.convert("RGBA"), np.uint8).copy()
+    except FileNotFoundError:
+        raise InputError(f"reference image {path}: no such file") from None
+    except (OSError, UnidentifiedImageError) as exc:
+        raise InputError(f"reference image {path}: cannot read it as an image ({exc})") from None
+
+
+def reference_billboard(image: np.ndarray, height: float = 1.0) -> Billboard:
+    """The reference ``image`` (H, W, 4) standing on the ground (z = 0) behind the origin, facing the
+    front camera (-Y), ``height`` metres tall, as wide as the image's aspect makes it."""
+    from arboretum_library.errors import InputError
+
+    if not (np.isfinite(height) and height > 0):
+        raise InputError(f"--reference-height: must be a positive number of metres, got {height}")
+    h, w = image.shape[:2]
+    return Billboard(image, (0.0, REFERENCE_BEHIND * height, height / 2), height * w / h, height)
 
 
 class App:
@@ -45,8 +75,11 @@ class App:
 
     def __init__(self, renderer, port_factory: Callable[[], SessionPort], out_dir: str | Path = ".",
                  clock: Callable[[], float] = time.monotonic, ui: bool = True,
-                 scan: tuple[np.ndarray, np.ndarray | None] | None = None) -> None:
+                 scan: tuple[np.ndarray, np.ndarray | None] | None = None,
+                 reference: Billboard | None = None) -> None:
         self.renderer, self.size = renderer, renderer.size
+        self.reference, self.show_reference = reference, True
+        """A reference image drawn behind the tree (``reference_billboard``); key B shows/hides it."""
         self.clock, self.out_dir, self.ui_enabled, self.scan = clock, Path(out_dir), ui, scan
         self.state = ClientState()
         self.worker = Worker(port_factory)
@@ -107,7 +140,8 @@ class App:
         simple = {"undo": a.undo, "redo": a.redo, "menu": self.interaction.menu, "touchpad": self.interaction.touchpad,
                   "grow": a.grow, "export": lambda: a.export(self.out_dir), "mode": self.toggle_mode,
                   "save": lambda: a.save(self.out_dir / "session.npz"), "commit": a.commit_refinement,
-                  "load": lambda: a.load(self.out_dir / "session.npz"), "noop": lambda: None}
+                  "load": lambda: a.load(self.out_dir / "session.npz"), "noop": lambda: None,
+                  "reference": self.toggle_reference}
         if action in simple:
             simple[action]()
         elif head == "search":
@@ -137,7 +171,16 @@ class App:
         self._framed = False
         s.touch_scene()
 
-    KEYS = {"ctrl+z": "undo", "ctrl+y": "redo", "delete": "menu", "enter": "touchpad", "g": "grow", "x": "export",
+    def toggle_reference(self) -> None:
+        """Show or hide the reference image (a scene re-upload; its texture stays cached)."""
+        self.show_reference = not self.show_reference
+        self.state.touch_scene()
+
+    def set_reference(self, reference: Billboard | None) -> None:
+        self.reference, self.show_reference = reference, True
+        self.state.touch_scene()
+
+    KEYS = {"b": "reference", "ctrl+z": "undo", "ctrl+y": "redo", "delete": "menu", "enter": "touchpad", "g": "grow", "x": "export",
             "ctrl+s": "save", "ctrl+o": "load", "tab": "mode", "p": "toggle:show_points", "o": "toggle:show_all",
             "n": "focus:+", "]": "density:+", "[": "density:-", "/": "search:focus", "c": "commit"}
 
@@ -197,10 +240,13 @@ class App:
         if not flashing:
             s.merged_flash.clear()
         scene, self.touch = build_scene(s, now)
+        has_items = bool(scene.items)
+        if self.reference is not None and self.show_reference:
+            scene = dataclasses.replace(scene, items=(*scene.items, self.reference))
         self.renderer.upload(scene)
         self.names, self._uploaded, self.bounds = scene.names, s.scene_version, scene.bounds()
         self._last_pixel = {LEFT: None, RIGHT: None}
-        if not self._framed and scene.items:
+        if not self._framed and has_items:  # framed on the tree (and the reference) once a tree comes
             self.desktop.camera = fit_camera(scene.bounds(), "iso", self.size[0] / self.size[1])
             if self.ui_enabled:
                 self.desktop._pan(PANEL_PX / 2, 0.0)  # keep the tree clear of the side panel

@@ -2,12 +2,15 @@
 
     arboretum client [--connect ADDRESS | --offline] [--library LIB] [--scan FILE] [--size WxH]
                      [--headless] [--script S] [--screenshot out.png] [--vr] [--out DIR] [--json]
+                     [--reference IMAGE [--reference-height METRES]]
 
 Without ``--connect`` (and without ``--offline``, which uses built-in demo examples and no server) an
 embedded ``arboretum serve`` starts as a child process on a free loopback port and stops on exit.
 ``--headless`` renders with EGL (no display); ``--script`` feeds recorded input (see
 ``arboretum_client.scripts``), in a window too; ``--screenshot`` saves the last frame. ``--vr`` uses an
 OpenXR runtime when one is present and otherwise says why and opens the desktop window.
+``--reference`` shows a PNG/JPEG as a billboard standing behind the origin (key B hides/shows it); a
+script may name one too (top-level key ``reference``, relative to the script's folder).
 """
 
 from __future__ import annotations
@@ -32,6 +35,9 @@ def register(subparsers) -> None:
     p.add_argument("--script", metavar="S", help="JSON/YAML script of input events and tool actions")
     p.add_argument("--screenshot", metavar="PNG", help="save the last frame as PNG")
     p.add_argument("--vr", action="store_true", help="use an OpenXR headset when a runtime is present")
+    p.add_argument("--reference", metavar="IMAGE", help="PNG/JPEG shown behind the tree for image-guided modeling")
+    p.add_argument("--reference-height", type=float, default=None, metavar="METRES",
+                   help="height of the reference image in metres (default 1.0; width from its aspect)")
     p.add_argument("--out", default=".", metavar="DIR", help="folder for exports and session saves (default .)")
     p.add_argument("--frames", type=int, default=0, help=argparse.SUPPRESS)  # window tests: close after N frames
     add_json_flag(p)
@@ -65,6 +71,21 @@ def _scan(path: str | None):
     return cloud.points, getattr(cloud, "labels", None)
 
 
+def _reference(args):
+    """The reference billboard from ``--reference`` or else the script's ``reference`` key, or None."""
+    from .app import load_reference, reference_billboard
+    from .scripts import script_reference
+
+    path, height = script_reference(args.script) if args.script else (None, None)
+    if args.reference:
+        path = args.reference
+    if args.reference_height is not None:
+        height = args.reference_height
+    if path is None:
+        return None
+    return reference_billboard(load_reference(path), 1.0 if height is None else height)
+
+
 def run(args: argparse.Namespace) -> int:
     from arboretum_library.errors import InputError
 
@@ -73,6 +94,7 @@ def run(args: argparse.Namespace) -> int:
     size = parse_size(args.size)
     if args.headless and not args.script:
         raise InputError("--headless needs --script S (there is no one to click)")
+    args.reference_item = _reference(args)  # before the server starts: a bad image is a quick error
     cleanup: list = []
     try:
         factory = _port_factory(args, cleanup)
@@ -111,7 +133,8 @@ def _run_headless(args, size, factory, scan) -> dict:
 
     with OffscreenRenderer(size) as off, off.ctx:
         holder: list = []
-        app = App(off.renderer, factory, args.out, clock=lambda: holder[0].clock(), scan=scan)
+        app = App(off.renderer, factory, args.out, clock=lambda: holder[0].clock(), scan=scan,
+                  reference=args.reference_item)
         runner = ScriptRunner(app, base=Path("."))
         holder.append(runner)
         try:
@@ -148,7 +171,7 @@ def _window_loop(args, win, size, factory, scan) -> dict:
     from .window_input import install_callbacks
 
     renderer = Renderer(win.ctx, size)
-    app = App(renderer, factory, args.out, scan=scan)
+    app = App(renderer, factory, args.out, scan=scan, reference=args.reference_item)
     install_callbacks(win.handle, app)
     app.start()
     shots, frames = [], 0
@@ -186,7 +209,7 @@ def _run_vr(args, runtime, factory, scan) -> dict:
     ctx = current_context()
     sc = runtime.context.swapchains[0]  # type: ignore[attr-defined]
     renderer = Renderer(ctx, (sc.width, sc.height))
-    app = App(renderer, factory, args.out, scan=scan, ui=False)
+    app = App(renderer, factory, args.out, scan=scan, ui=False, reference=args.reference_item)
     app.start()
     try:
         frames = VrSession(app, runtime).run(args.frames or None)

@@ -144,7 +144,56 @@ class Grid:
     color: tuple[float, float, float, float] = (0.55, 0.57, 0.6, 1.0)
 
 
-Item = PointSet | Polyline | Mesh | InstancedMesh
+@dataclass(frozen=True, eq=False)
+class Billboard:
+    """A textured, alpha-blended rectangle in the world, e.g. a reference photo for image-guided
+    modeling. Not pickable: it is left out of the ID pass, so items behind it stay pickable."""
+
+    image: NDArray[np.uint8]
+    """(H, W, 4) uint8 RGBA, top row first, not premultiplied (alpha 0 shows what is behind)."""
+    center: F32
+    """(3,) float32, metres, world frame: the rectangle's centre."""
+    width: float
+    """Metres along the image's rows (left to right)."""
+    height: float
+    """Metres along the image's columns (bottom to top)."""
+    normal: F32 | None = field(default_factory=lambda: np.array([0.0, -1.0, 0.0], np.float32))
+    """(3,) float32: the side the picture faces (default -Y, towards the front camera), or None to
+    turn about the vertical axis through ``center`` so that it always faces the camera."""
+    pick_id: int = 0
+
+    def __post_init__(self) -> None:
+        img = _array(self, "image", np.uint8, (None, None, 4))
+        if img.shape[0] < 1 or img.shape[1] < 1:
+            raise ValidationError(f"Billboard.image: empty image {img.shape}")
+        _array(self, "center", np.float32, (3,))
+        if not (np.isfinite(self.width) and np.isfinite(self.height) and self.width > 0 and self.height > 0):
+            raise ValidationError(f"Billboard: width and height must be > 0, got {self.width} x {self.height}")
+        if self.normal is not None and not np.linalg.norm(_array(self, "normal", np.float32, (3,))) > 0:
+            raise ValidationError("Billboard.normal: must not be the zero vector")
+
+    def axes(self, eye: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(right, up): (3,) float64 half-extent vectors in the world frame (``eye`` (3,) is used
+        only when ``normal`` is None)."""
+        if self.normal is None:
+            n = np.asarray(eye if eye is not None else (0.0, -1.0, 0.0), np.float64) - self.center
+            n[2] = 0.0
+        else:
+            n = np.asarray(self.normal, np.float64).copy()
+        n = n / np.linalg.norm(n) if np.linalg.norm(n) > 1e-9 else np.array([0.0, -1.0, 0.0])
+        up = np.array([0.0, 0.0, 1.0]) if abs(n[2]) < 0.999 else np.array([0.0, 1.0, 0.0])
+        right = np.cross(up, n)
+        right /= np.linalg.norm(right)
+        return right * (self.width / 2), np.cross(n, right) * (self.height / 2)
+
+    def corners(self, eye: np.ndarray | None = None) -> np.ndarray:
+        """(4, 3) float64 world corners: bottom-left, bottom-right, top-left, top-right."""
+        r, u = self.axes(eye)
+        c = self.center.astype(np.float64)
+        return np.stack([c - r - u, c + r - u, c - r + u, c + r + u])
+
+
+Item = PointSet | Polyline | Mesh | InstancedMesh | Billboard
 
 
 @dataclass(frozen=True)
@@ -152,7 +201,7 @@ class Scene:
     """Everything to draw in one frame."""
 
     items: tuple[Any, ...] = ()
-    """PointSet, Polyline, Mesh and InstancedMesh records."""
+    """PointSet, Polyline, Mesh, InstancedMesh and Billboard records."""
     grid: Grid | None = None
     names: dict[int, str] = field(default_factory=dict)
     """pick_id -> a name such as 'branch:0' or 'lobe:2'."""
@@ -172,6 +221,8 @@ def _item_points(item: Any) -> np.ndarray:
         return item.points
     if isinstance(item, Mesh):
         return item.vertices
+    if isinstance(item, Billboard):
+        return item.corners()
     if isinstance(item, InstancedMesh):  # the mesh's box corners under every instance transform
         v = item.mesh.vertices
         lo, hi = v.min(axis=0), v.max(axis=0)

@@ -15,7 +15,12 @@ Steps (one key each):
 - ``{"hands": [{"side": "left", "position": [x, y, z], "buttons": ["grip"]}, ...]}``: VR-style hand
   samples (kept until ``{"hands": null}``);
 - ``{"select": ["lobe:2", "lobe:5"]}``: select by pick name (as trigger clicks would);
-- ``{"view": "iso"}``: frame the scene from a named view; ``{"screenshot": "out.png"}``.
+- ``{"view": "iso"}``: frame the scene from a named view; ``{"screenshot": "out.png"}``;
+- ``{"reference": "photo.png"}`` (or ``{"image": ..., "height": metres}``, or null to remove it): show a
+  reference image behind the tree (``App.set_reference``; the action ``reference`` hides/shows it).
+
+Top-level keys besides ``steps``: ``reference`` (an image path, relative to the script's folder) and
+``reference_height`` (metres), read by ``arboretum client`` like ``--reference`` / ``--reference-height``.
 """
 
 from __future__ import annotations
@@ -53,6 +58,18 @@ def load_script(path: str | Path) -> dict:
     if not isinstance(data, dict) or not isinstance(data.get("steps"), list):
         raise InputError(f"script {path}: expected a list of steps or {{'steps': [...]}}")
     return data
+
+
+def script_reference(path: str | Path) -> tuple[str | None, float | None]:
+    """The script's top-level ``reference`` image path (resolved against the script's folder) and
+    ``reference_height``, each None when absent."""
+    data = load_script(path)
+    ref, height = data.get("reference"), data.get("reference_height")
+    if ref is not None and not isinstance(ref, str):
+        raise InputError(f"script {path}: 'reference' must be an image path, got {ref!r}")
+    if height is not None and not isinstance(height, int | float):
+        raise InputError(f"script {path}: 'reference_height' must be a number of metres, got {height!r}")
+    return (str(Path(path).parent / ref) if ref else None), (float(height) if height is not None else None)
 
 
 class ScriptRunner:
@@ -175,6 +192,15 @@ class ScriptRunner:
             T[:3, 3] = spec["position"]
             samples.append(HandSample(spec["side"], T, buttons=frozenset(spec.get("buttons", ()))))
         self.app.vr_samples = lambda: samples
+
+    def _step_reference(self, spec) -> None:
+        from .app import load_reference, reference_billboard
+
+        if spec is None:
+            self.app.set_reference(None)
+            return
+        path, height = (spec, 1.0) if isinstance(spec, str) else (spec["image"], float(spec.get("height", 1.0)))
+        self.app.set_reference(reference_billboard(load_reference(self.base / path), height))
 
     def _step_screenshot(self, path: str) -> None:
         from .headless import save_png

@@ -19,6 +19,7 @@ PROGRAMS: dict[str, tuple[str, ...]] = {
     "lines": ("lines.vert.glsl", "lines.geom.glsl", "flat.frag.glsl"),
     "background": ("background.vert.glsl", "background.frag.glsl"),
     "ui": ("ui.vert.glsl", "ui.frag.glsl"),
+    "billboard": ("billboard.vert.glsl", "billboard.frag.glsl"),
 }
 """Program name -> (vertex, [geometry,] fragment) shader file names."""
 

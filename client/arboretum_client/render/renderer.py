@@ -2,10 +2,11 @@
 
 It always draws into its own framebuffer, so a window and EGL differ only by the context. Passes:
 1. background gradient (no depth); 2. ground grid; 3. opaque batches (tubes, meshes, instanced meshes,
-points, lines); 4. translucent meshes, sorted far to near by centre, alpha-blended with depth writes off,
+points, lines); 3b. billboards (textured, alpha-blended, one call each); 4. translucent meshes, sorted far to near by centre, alpha-blended with depth writes off,
 each drawn back faces first then front faces. Anti-aliasing is MSAA when the context offers it,
 else 2x supersampling downscaled on read-back. Picking renders the same opaque and translucent batches
-with integer-output programs into an R32I buffer (nearest surface wins), on demand.
+with integer-output programs into an R32I buffer (nearest surface wins), on demand; billboards are not
+in it (not pickable). A billboard's texture is uploaded once per image and cached across uploads.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import moderngl
 import numpy as np
 
 from arboretum_client.camera import Camera
-from arboretum_client.scene import Grid, InstancedMesh, Mesh, PointSet, Polyline, Scene
+from arboretum_client.scene import Billboard, Grid, InstancedMesh, Mesh, PointSet, Polyline, Scene
 
 from . import buffers
 from .programs import Programs, set_uniforms
@@ -62,6 +63,12 @@ class Renderer:
         self._ui_on = False
         self._ui_vao = ctx.vertex_array(self.programs.color["ui"], [])
         self.grid: buffers.Batch | None = None
+        self.billboards: list[Billboard] = []
+        self._textures: dict[int, tuple[np.ndarray, moderngl.Texture]] = {}
+        """id(Billboard.image) -> (that image, kept alive so the id stays unique; its texture)."""
+        self.texture_uploads = 0
+        """Billboard textures uploaded since this renderer was made (tests check the cache)."""
+        self._billboard_vao = ctx.vertex_array(self.programs.color["billboard"], [])
         self.stats = FrameStats()
         self._camera: Camera | None = None
         self._pick_valid = False
@@ -83,7 +90,25 @@ class Renderer:
         self.clear_scene()
         self.batches = self._build(scene)
         self.grid = self._grid_batch(scene.grid) if scene.grid else None
+        self.billboards = [it for it in scene.items if isinstance(it, Billboard)]
+        self._sync_textures()
         self._pick_valid = False
+
+    def _sync_textures(self) -> None:
+        """Upload the textures of new billboard images; free those no billboard uses any more."""
+        keep = {id(b.image) for b in self.billboards}
+        for key in [k for k in self._textures if k not in keep]:
+            self._textures.pop(key)[1].release()
+        for b in self.billboards:
+            if id(b.image) in self._textures:
+                continue
+            h, w = b.image.shape[:2]
+            tex = self.ctx.texture((w, h), 4, np.ascontiguousarray(b.image).tobytes())
+            tex.build_mipmaps()
+            tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+            tex.repeat_x = tex.repeat_y = False
+            self._textures[id(b.image)] = (b.image, tex)
+            self.texture_uploads += 1
 
     def upload_overlay(self, scene: Scene) -> None:
         """Replace the overlay: small, often-changing items (hands, strokes, gizmos) drawn with the
@@ -189,6 +214,7 @@ class Renderer:
         ctx.enable(moderngl.DEPTH_TEST | moderngl.PROGRAM_POINT_SIZE)
         for b in ([self.grid] if self.grid else []) + [b for b in self.batches + self.overlay if not b.translucent]:
             self._draw(b, False, frame, s)
+        self._billboard_pass(camera, frame)
         self._translucent_pass(camera, frame)
         if self._ui_on and self._ui_tex is not None:
             self._draw_ui()
@@ -207,6 +233,25 @@ class Renderer:
         sampler.value = 0
         self._ui_vao.render(moderngl.TRIANGLES, vertices=3)
         self.stats.draw_calls += 1
+        ctx.disable(moderngl.BLEND)
+
+    def _billboard_pass(self, camera: Camera, frame: dict) -> None:
+        """Each billboard, far to near: one textured strip, alpha-blended, depth-tested and written."""
+        if not self.billboards:
+            return
+        ctx, eye, prog = self.ctx, np.asarray(camera.eye, np.float64), self.programs.color["billboard"]
+        ctx.enable(moderngl.BLEND)
+        ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+        for b in sorted(self.billboards, key=lambda b: -np.linalg.norm(b.center - eye)):
+            right, up = b.axes(eye)
+            set_uniforms(prog, **frame, u_center=b.center, u_right=right, u_up=up)
+            self._textures[id(b.image)][1].use(0)
+            sampler = prog["u_image"]
+            assert isinstance(sampler, moderngl.Uniform)
+            sampler.value = 0
+            self._billboard_vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
+            self.stats.draw_calls += 1
+            self.stats.triangles += 2
         ctx.disable(moderngl.BLEND)
 
     def resolve(self) -> None:
@@ -284,6 +329,9 @@ class Renderer:
         """Free every GL object of this renderer and bind the default framebuffer again (binding a
         deleted framebuffer later would be a GL error)."""
         self.clear_scene()
+        self.billboards = []
+        self._sync_textures()
+        self._billboard_vao.release()
         for b in self.overlay:
             b.release()
         self.overlay = []
