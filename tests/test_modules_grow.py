@@ -243,3 +243,36 @@ def test_large_crown_reaches_the_papers_module_count(modules):
         past_entry = (world - T[:3, 3]) @ tree.direction[i] >= tree.entry[i]
         worst = max(worst, crown_sdf(crown, world[past_entry]).max(initial=-np.inf))
     assert worst <= tol
+
+
+def _choose_modules_reference(target, parent_radius, size, base_radius, s_lo, s_hi, gather):
+    """The numpy running argmin over modules (float32) that the numba kernel replaced."""
+    ratio = parent_radius[None, :] / base_radius[:, None]
+    cap = np.where(ratio >= s_lo, np.minimum(ratio, s_hi), -1e9).astype(np.float32)
+    t32, inv = target.astype(np.float32), (1.0 / size).astype(np.float32)
+    best = np.zeros(target.shape, dtype=np.int64)
+    best_err = np.full(target.shape, np.inf, dtype=np.float32)
+    for m in range(len(size)):
+        err = np.abs(np.minimum(np.maximum(t32 * inv[m], np.float32(s_lo)), cap[m][gather]) - 1)
+        best[err < best_err] = m
+        best_err = np.minimum(best_err, err)
+    cap_best = cap[best, gather]
+    pick = np.minimum(np.maximum(t32 * inv[best], np.float32(s_lo)), cap_best)
+    return best, pick.astype(np.float64), cap_best >= s_lo
+
+
+def test_eq1_kernel_equals_the_numpy_running_argmin():
+    from arboretum_server.modules.pairing import choose_modules
+
+    rng = np.random.default_rng(5)
+    size = np.concatenate([rng.uniform(0.3, 2.0, 20), [1.0, 1.0, 0.5]])  # repeated sizes: ties
+    base_r = np.concatenate([rng.uniform(0.01, 0.05, 20), [0.02, 0.02, 0.02]])
+    radius = np.concatenate([rng.uniform(0.0, 0.1, 3000), np.zeros(100)])  # some thin: infeasible
+    gather = rng.integers(0, len(radius), (700, 25))
+    target = rng.uniform(0.0, 5.0, gather.shape)
+    target[:5] = 1.0  # exact ties between the equal modules
+    got = choose_modules(target, radius, size, base_r, 0.5, 2.0, gather=gather)
+    want = _choose_modules_reference(target, radius, size, base_r, 0.5, 2.0, gather)
+    for g, w in zip(got, want):
+        np.testing.assert_array_equal(g, w)
+    assert 0 < want[2].mean() < 1 and len(np.unique(want[0])) > 10

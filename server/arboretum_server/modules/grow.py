@@ -30,28 +30,29 @@ from .tree import ModularTree, ModularTreeStats
 
 @dataclass
 class _Pool:
-    """Unused branching points (world) and the instance each lies on."""
+    """Unused branching points (world) and the instance each lies on.
 
-    points: BranchPoints
+    ``data`` (N, 10) float64 packs position (3), normal (3), tangent (3) and radius (1) per point, so a
+    layer's removal and addition copy one array, not four.
+    """
+
+    data: np.ndarray
     owner: np.ndarray
 
-    def take(self, keep: np.ndarray) -> _Pool:
-        p = self.points
-        return _Pool(
-            BranchPoints(p.position[keep], p.normal[keep], p.tangent[keep], p.radius[keep]),
-            self.owner[keep],
-        )
+    @staticmethod
+    def of(p: BranchPoints, owner: np.ndarray) -> _Pool:
+        return _Pool(np.column_stack([p.position, p.normal, p.tangent, p.radius]), owner)
 
-    def add(self, other: BranchPoints, owner: np.ndarray) -> _Pool:
-        p = self.points
-        cat = [
-            np.concatenate([a, b])
-            for a, b in zip(
-                (p.position, p.normal, p.tangent, p.radius),
-                (other.position, other.normal, other.tangent, other.radius),
-            )
-        ]
-        return _Pool(BranchPoints(*cat), np.concatenate([self.owner, owner]))
+    @property
+    def points(self) -> BranchPoints:
+        d = self.data
+        return BranchPoints(d[:, 0:3], d[:, 3:6], d[:, 6:9], d[:, 9])
+
+    def take(self, keep: np.ndarray) -> _Pool:
+        return _Pool(self.data[keep], self.owner[keep])
+
+    def add(self, other: _Pool) -> _Pool:
+        return _Pool(np.concatenate([self.data, other.data]), np.concatenate([self.owner, other.owner]))
 
 
 def _skeleton_samples(modules: ModuleSet, idx: np.ndarray, n: int = 30) -> np.ndarray:
@@ -163,10 +164,11 @@ def grow_modular_tree(
         live = np.flatnonzero(alive)
         if len(live) == 0 or len(pool.owner) == 0:
             break
+        points = pool.points
         assign = assign_attraction(
             attract[live],
-            pool.points.position,
-            pool.points.radius,
+            np.ascontiguousarray(points.position),
+            points.radius,
             pm.size,
             pm.base_radius,
             crown,
@@ -181,7 +183,7 @@ def grow_modular_tree(
         pl = local_step(
             assign,
             attract[live],
-            pool.points,
+            points,
             crown,
             pm.size,
             pm.base_radius,
@@ -214,7 +216,7 @@ def _trunk_pool(
     inside = crown_sdf(crown, tbp.position) <= 0
     prune = o.prune_trunk_outside if o.prune_trunk_outside is not None else bool(inside.any())
     keep = _new_points(tbp, crown, not prune, o.cull_fraction, rng)
-    return _Pool(tbp, np.zeros(len(inside), dtype=np.int64)).take(keep)
+    return _Pool.of(tbp, np.zeros(len(inside), dtype=np.int64)).take(keep)
 
 
 def _next_pool(
@@ -239,10 +241,7 @@ def _next_pool(
     new = BranchPoints(position, normal, tangent, np.concatenate([b.radius for b in local]) * scale[k])
     owner = first + k
     keep = _new_points(new, crown, False, o.cull_fraction, rng)
-    return pool.add(
-        BranchPoints(new.position[keep], new.normal[keep], new.tangent[keep], new.radius[keep]),
-        owner[keep],
-    )
+    return pool.add(_Pool.of(new, owner).take(keep))
 
 
 def _placed(local: list, grown: list, factor: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -268,7 +267,7 @@ def _record(
     inst: dict, pl, pool: _Pool, branches: np.ndarray, base_r: np.ndarray, depth: int
 ) -> list:
     """Append the placements to ``inst``; returns [(module set index, T_world_module)]."""
-    out = []
+    out, pts = [], pool.points
     for k in range(len(pl.module)):
         m = int(branches[pl.module[k]])
         T = np.eye(4)
@@ -281,9 +280,9 @@ def _record(
             ("parent", int(pool.owner[b])),
             ("depth", depth),
             ("scale", float(pl.scale[k])),
-            ("r_p", float(pool.points.radius[b])),
+            ("r_p", float(pts.radius[b])),
             ("r_c", float(base_r[pl.module[k]] * pl.scale[k])),
-            ("t_p", pool.points.tangent[b]),
+            ("t_p", pts.tangent[b].copy()),
             ("dir", pl.direction[k]),
             ("entry", float(pl.entry[k])),
         ):

@@ -1,17 +1,45 @@
 """Global step (Sec. 4.3): pair attraction points with branching points by the cost of Eqs. 1-2.
 
 Each attraction point meets its k nearest branching points (cKDTree). Eq. 1 picks a module and scale for
-every pair at once; Eq. 2 ranks the pairs. Paths that leave the crown are rejected by sphere tracing,
+every pair at once (a numba kernel, compiled on first use and cached: one pass over pairs x modules);
+Eq. 2 ranks the pairs. Paths that leave the crown are rejected by sphere tracing,
 lazily: only an attraction point's current best pair is traced, and the next one only if it fails.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from scipy.spatial import cKDTree
 
 from .crown import Crown
 from .trace import segments_stay_inside
+
+
+@njit(cache=True)
+def _running_argmin(t32, inv, s_lo, s_hi, radius, base_radius, gather):  # pragma: no cover - compiled
+    """Eq. 1 per pair: the module minimising |clamp(t / size, s_l, cap) - 1|, in float32, ties keep the first.
+
+    t32 (N,) float32 targets d_t, inv (M,) float32 1 / size, radius (Nb,) r_p and base_radius (M,) r_c
+    float64, gather (N,) int64 branching point of each pair. cap = min(r_p / r_c, s_u) as float32 when
+    r_p / r_c >= s_l, else -1e9 (infeasible). Returns the module (N,) and its cap (N,) float32: the same
+    float32 operations, in the same order, as the numpy running argmin over modules it replaced.
+    """
+    n, one, lo = len(t32), np.float32(1.0), np.float32(s_lo)
+    best = np.zeros(n, dtype=np.int64)
+    cap_best = np.zeros(n, dtype=np.float32)
+    for i in range(n):
+        r, t, best_err = radius[gather[i]], t32[i], np.float32(np.inf)
+        for m in range(len(inv)):
+            ratio = r / base_radius[m]
+            c = np.float32(min(ratio, s_hi)) if ratio >= s_lo else np.float32(-1e9)
+            e = t * inv[m]
+            e = e if e >= lo else lo
+            e = e if e <= c else c
+            e = abs(e - one)
+            if e < best_err:
+                best_err, best[i], cap_best[i] = e, m, c
+    return best, cap_best
 
 
 def choose_modules(
@@ -32,22 +60,17 @@ def choose_modules(
     """
     if gather is None:
         gather, parent_radius = np.arange(parent_radius.size).reshape(target.shape), parent_radius.ravel()
-    ratio = parent_radius[None, :] / base_radius[:, None]  # (M, Nb): one contiguous row per module
-    # infeasible modules get a huge negative cap: their clamped scale, and so their error, is enormous
-    cap = np.where(ratio >= s_lo, np.minimum(ratio, s_hi), -1e9).astype(np.float32)
     t32, inv = target.astype(np.float32), (1.0 / size).astype(np.float32)
-    best = np.zeros(target.shape, dtype=np.int64)
-    best_err = np.full(target.shape, np.inf, dtype=np.float32)
-    err = np.zeros(target.shape, dtype=np.float32)
-    for m in range(len(size)):  # running argmin over modules (ties keep the first, as argmin does)
-        np.multiply(t32, inv[m], out=err)
-        np.maximum(err, np.float32(s_lo), out=err)
-        np.minimum(err, cap[m][gather], out=err)
-        err -= np.float32(1.0)
-        np.abs(err, out=err)
-        best[err < best_err] = m
-        np.minimum(best_err, err, out=best_err)
-    cap_best = cap[best, gather]
+    best, cap_best = _running_argmin(
+        t32.ravel(),
+        inv,
+        float(s_lo),
+        float(s_hi),
+        np.ascontiguousarray(parent_radius, dtype=np.float64),
+        np.ascontiguousarray(base_radius, dtype=np.float64),
+        gather.ravel().astype(np.int64),
+    )
+    best, cap_best = best.reshape(target.shape), cap_best.reshape(target.shape)
     pick = np.minimum(np.maximum(t32 * inv[best], np.float32(s_lo)), cap_best)
     return best, pick.astype(np.float64), cap_best >= s_lo
 
@@ -82,7 +105,9 @@ def assign_attraction(
     if na == 0 or len(bp_pos) == 0:
         return np.full(na, -1)
     k = min(k, len(bp_pos))
-    dt, j = cKDTree(bp_pos, balanced_tree=False).query(attract, k=k, workers=-1)
+    dt, j = cKDTree(bp_pos, leafsize=32, balanced_tree=False).query(
+        attract, k=k, workers=-1
+    )
     dt, j = dt.reshape(na, k), j.reshape(na, k)
     best_mod, s, feasible = choose_modules(dt, bp_radius, size, base_radius, s_lo, s_hi, gather=j)
     sigma = pair_cost(dt, size[best_mod] * s, feasible, C)
