@@ -6,7 +6,7 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 APT_PACKAGES := libusb-1.0-0 libegl1 libgl1 libgles2 libglx-mesa0 libegl-mesa0 xvfb xauth
-EXTRAS := server,client,export,photos,dev
+EXTRAS := server,client,export,photos,vr,dev
 export OMP_WAIT_POLICY := PASSIVE
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
 
