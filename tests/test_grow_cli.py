@@ -9,20 +9,21 @@ import pytest
 from plyfile import PlyData
 
 from arboretum_library.cli import main
+from arboretum_library.codec import load_record, save_record
 from arboretum_library.errors import InputError
-from arboretum_server.grow.io import load_hbl, save_hbl
+from arboretum_library.model import HBL
 from factories import make_hbl
 
 
 @pytest.fixture(scope="module")
 def hbl_file(tmp_path_factory):
     path = tmp_path_factory.mktemp("hbl") / "tree.npz"
-    save_hbl(path, make_hbl(np.random.default_rng(9), n_main=2, n_lobes=3))
+    save_record(path, make_hbl(np.random.default_rng(9), n_main=2, n_lobes=3))
     return path
 
 
 def test_save_load_round_trip(hbl_file):
-    h = load_hbl(hbl_file)
+    h = load_record(hbl_file, HBL)
     ref = make_hbl(np.random.default_rng(9), n_main=2, n_lobes=3)
     assert len(h.branches) == len(ref.branches) and len(h.lobes) == len(ref.lobes)
     assert np.array_equal(h.lobes[1].hull_faces, ref.lobes[1].hull_faces)
@@ -69,7 +70,7 @@ def test_missing_or_wrong_file(tmp_path, capsys):
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"not a zip")
     with pytest.raises(InputError, match="not a readable .npz"):
-        load_hbl(bad)
+        load_record(bad, HBL)
 
 
 def test_branch_radii_flag(tmp_path, hbl_file, capsys):
@@ -79,7 +80,7 @@ def test_branch_radii_flag(tmp_path, hbl_file, capsys):
         assert main(["grow", str(hbl_file), "--out", str(tmp_path / f"{mode}.ply"), "--branch-radii", mode,
                      "--json"]) == 0
         trunk[mode] = json.loads(capsys.readouterr().out)["trunk_radius"]
-    assert trunk["hbl"] == pytest.approx(load_hbl(hbl_file).branches[0].radii[0], rel=1e-12)
+    assert trunk["hbl"] == pytest.approx(load_record(hbl_file, HBL).branches[0].radii[0], rel=1e-12)
     assert trunk["pipe"] != pytest.approx(trunk["hbl"], rel=1e-3)
 
 

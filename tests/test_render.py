@@ -309,21 +309,14 @@ def test_cli_renders_an_hbl_record_and_a_mesh(tmp_path, gl):
     assert bad.returncode == 2 and "missing.xyz: no such file" in bad.stderr
 
 
-def test_load_hbl_reads_both_npz_conventions(tmp_path):
-    import json
-
+def test_load_hbl_reads_record_files(tmp_path):
     from arboretum_client.render_cli import load_hbl
-    from arboretum_library.codec import arrays_to_npz, flatten, save_record
+    from arboretum_library.codec import arrays_to_npz, save_record
 
     tree = small_tree()
-    a = load_hbl(save_record(tmp_path / "a.npz", tree))
-    meta, arrays = flatten(tree)
-    blob = np.frombuffer(json.dumps({"record": "HBL", "version": 1, "meta": meta}).encode(), np.uint8)
-    (tmp_path / "b.npz").write_bytes(arrays_to_npz({**arrays, "__meta__": blob}))
-    b = load_hbl(tmp_path / "b.npz")
-    for h in (a, b):
-        assert len(h.branches) == 2 and len(h.lobes) == 1
-        np.testing.assert_array_equal(h.branches[0].points, tree.branches[0].points)
+    h = load_hbl(save_record(tmp_path / "a.npz", tree))
+    assert len(h.branches) == 2 and len(h.lobes) == 1
+    np.testing.assert_array_equal(h.branches[0].points, tree.branches[0].points)
     (tmp_path / "c.npz").write_bytes(arrays_to_npz({"x": np.zeros(3)}))
     with pytest.raises(InputError, match="not an Arboretum record"):
         load_hbl(tmp_path / "c.npz")

@@ -90,54 +90,28 @@ def load_scene(path: Path, style):
 
 
 def load_hbl(path: Path):
-    """An HBL or Example from an .npz: ``codec.save_record`` files (``__meta__`` = {kind, schema,
-    record}) or the grow stage's HBL files (``__meta__`` = {record: 'HBL', version, meta})."""
-    import json
-
+    """An HBL or Example from a record .npz (``codec.save_record``); ``InputError`` for anything else."""
     from arboretum_library import codec
-    from arboretum_library.errors import ArboretumError
     from arboretum_library.model import HBL, Example
 
-    try:
-        arrays = codec.npz_to_arrays(path.read_bytes(), str(path))
-        head = json.loads(arrays.pop(codec.META_KEY).tobytes().decode())
-    except (KeyError, ValueError, ArboretumError):
-        raise InputError(f"{path}: not an Arboretum record .npz (no readable {codec.META_KEY} entry)") from None
     types = {"HBL": HBL, "Example": Example}
-    if isinstance(head, dict) and head.get("kind") in types:
-        return codec.load_record(path, types[head["kind"]])
-    if isinstance(head, dict) and head.get("record") == "HBL" and "meta" in head:
-        try:
-            return codec.unflatten(HBL, head["meta"], arrays)
-        except ArboretumError as exc:
-            raise InputError(f"{path}: not a valid HBL ({exc})") from None
-    kind = head.get("kind", head.get("record")) if isinstance(head, dict) else None
-    raise InputError(f"{path}: holds a {kind!r} record; render reads HBL or Example records")
+    kind = codec.record_kind(path)
+    if kind not in types:
+        raise InputError(f"{path}: holds a {kind!r} record; render reads HBL or Example records")
+    return codec.load_record(path, types[kind])
 
 
 def read_point_cloud(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
-    """Points (N, 3) and colours (N, 3) or None (from the file's colours, else its wood/leaf labels),
-    read with ``arboretum_library.pointio`` when present, else as x y z text columns."""
-    try:
-        from arboretum_library.pointio import read_points
-    except ImportError:
-        read_points = None
-    if read_points is not None:
-        cloud = read_points(path)
-        colors = getattr(cloud, "colors", None)
-        labels = getattr(cloud, "labels", None)
-        if colors is None and labels is not None:
-            from .scene_build import LEAF_COLOR, WOOD_COLOR
+    """Points (N, 3) and colours (N, 3) or None (from the file's colours, else its wood/leaf labels)."""
+    from arboretum_library.pointio import read_points
 
-            colors = np.where((np.asarray(labels) == 1)[:, None], LEAF_COLOR, WOOD_COLOR)
-        return np.asarray(getattr(cloud, "points", cloud), np.float64).reshape(-1, 3), colors
-    try:
-        data = np.loadtxt(path, comments="#", delimiter="," if path.suffix.lower() == ".csv" else None, ndmin=2)
-    except ValueError as exc:
-        raise InputError(f"{path}: not a text point cloud with x y z columns ({exc})") from None
-    if data.shape[1] < 3 or not len(data):
-        raise InputError(f"{path}: needs at least one row of x y z, got shape {data.shape}")
-    return data[:, :3], None
+    cloud = read_points(path)
+    colors = cloud.colors
+    if colors is None and cloud.labels is not None:
+        from .scene_build import LEAF_COLOR, WOOD_COLOR
+
+        colors = np.where((cloud.labels == 1)[:, None], LEAF_COLOR, WOOD_COLOR)
+    return np.asarray(cloud.points, np.float64), colors
 
 
 def read_ply(path: Path) -> tuple[np.ndarray, np.ndarray]:
