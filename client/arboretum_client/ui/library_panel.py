@@ -48,10 +48,4 @@ def _tool_buttons(c: Canvas, s: ClientState, x0: int, y: int) -> None:
         [("grow", "grow", s.grown is not None), ("export", "export", False)],
         [("save", "save", False), ("load", "load", False), ("refine", "mode", False)],
     ]
-    for row in rows:
-        x = x0 + 8
-        for label, action, on in row:
-            w = 10 + 7 * len(label)
-            c.button((x, y, x + w, y + LINE_H), label, action, on)
-            x += w + 4
-        y += LINE_H + 4
+    y = c.button_rows(x0, y, rows)

@@ -34,10 +34,4 @@ def draw(c: Canvas, s: ClientState) -> None:
         [("commit to library", "commit", False)],
         [("modeling", "mode", False)],
     ]
-    for row in rows:
-        x = x0 + 8
-        for label, action, on in row:
-            w = 10 + 7 * len(label)
-            c.button((x, y, x + w, y + LINE_H), label, action, on)
-            x += w + 4
-        y += LINE_H + 4
+    y = c.button_rows(x0, y, rows)

@@ -60,6 +60,17 @@ class Canvas:
         self.text((box[0] + 6, box[1] + 2), label, TEXT)
         self.regions.append((box, action))
 
+    def button_rows(self, x0: int, y: int, rows: list[list[tuple[str, str, bool]]]) -> int:
+        """Rows of (label, action, on) buttons sized to their labels, from (x0 + 8, y); the y below them."""
+        for row in rows:
+            x = x0 + 8
+            for label, action, on in row:
+                w = 10 + 7 * len(label)
+                self.button((x, y, x + w, y + LINE_H), label, action, on)
+                x += w + 4
+            y += LINE_H + 4
+        return y
+
     def bar(self, box: tuple[int, int, int, int], fraction: float | None) -> None:
         """A progress bar; ``None`` draws an indeterminate (striped) bar."""
         self.draw.rectangle(box, fill=BUTTON)
