@@ -2,7 +2,9 @@
 
 Limbs meet only at their ends: a junction joins the last ring of a limb with the first rings of its
 children through the convex hull of those rings (faces lying in one ring's plane are dropped). Bases and
-tips get fan caps. Enough for procedural module sets; the shared tube mesher can replace it later.
+tips get fan caps. It stays apart from ``arboretum_server.mesh.tubes`` on purpose: that mesher sweeps
+each chain as its own closed tube, while a module must be one connected mesh for the geodesic skeleton
+of Appendix A (``modules.skeleton``) to reach every branch from the base.
 """
 
 from __future__ import annotations
