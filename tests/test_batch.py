@@ -210,3 +210,23 @@ def test_killed_build_resumes_without_redoing(scans, tmp_path, sig):
     with Library.open(lib, readonly=True) as L:
         for ids in per_source.values():
             assert len(ids) == L.get(ids[0]).provenance.parameters[SCAN_EXAMPLES_KEY]
+
+
+def _worker_settings() -> dict:
+    import dask
+
+    return {"env": {k: v for k, v in os.environ.items() if k.startswith(("MALLOC_", "OMP_", "OPENBLAS_"))},
+            "profile": dask.config.get("distributed.worker.profile.enabled")}
+
+
+def test_local_workers_keep_glibc_malloc_defaults_and_no_profiler():
+    """Any MALLOC_*_ variable turns off glibc's dynamic mmap threshold (decompose 1.25-2.5x slower)."""
+    from arboretum_server.batch.build import _Cluster
+
+    with _Cluster(BuildOptions(workers=1)) as (client, name, n):
+        seen = list(client.run(_worker_settings).values())
+    assert name == "LocalCluster" and n == 1 and len(seen) == 1
+    env = seen[0]["env"]
+    assert not [k for k in env if k.startswith("MALLOC_")]
+    assert env["OMP_NUM_THREADS"] == "1" and env["OPENBLAS_NUM_THREADS"] == "1" and env["OMP_WAIT_POLICY"] == "PASSIVE"
+    assert seen[0]["profile"] is False

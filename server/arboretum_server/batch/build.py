@@ -29,7 +29,7 @@ from arboretum_library.errors import InputError
 from arboretum_library.pointio import READERS
 from arboretum_library.progress import ProgressFn, no_progress
 
-from .tasks import SCAN_EXAMPLES_KEY, WORKER_ENV, ScanOutcome, decompose_scan
+from .tasks import SCAN_EXAMPLES_KEY, WORKER_CONFIG, WORKER_ENV, ScanOutcome, decompose_scan
 
 
 @dataclass(frozen=True)
@@ -234,8 +234,8 @@ class _Cluster:
             return self.client, self.o.scheduler, n
         import dask
 
-        # Dask's default MALLOC_TRIM_THRESHOLD_=65536 made decompose 2.5x slower (docs/batch.md).
-        with dask.config.set({"distributed.nanny.pre-spawn-environ": dict(WORKER_ENV)}):
+        # Replaces Dask's worker environment: its MALLOC_TRIM_THRESHOLD_ made decompose 2.5x slower (tasks.py).
+        with dask.config.set({"distributed.nanny.pre-spawn-environ": dict(WORKER_ENV), **WORKER_CONFIG}):
             self.cluster = LocalCluster(n_workers=self.o.workers, threads_per_worker=1, processes=True,
                                         dashboard_address=None)
         self.client = Client(self.cluster)

@@ -21,10 +21,20 @@ THREAD_ENV = {
     "OPENBLAS_NUM_THREADS": "1",
 }
 """Environment of every worker: one BLAS/OpenMP thread per task, no spin-waiting (docs/batch.md)."""
-WORKER_ENV = {**THREAD_ENV, "MALLOC_TRIM_THRESHOLD_": str(128 * 1024 * 1024)}
-"""What LocalCluster workers start with. Dask's default ``MALLOC_TRIM_THRESHOLD_=65536`` (return freed
-memory to the system early) made ``decompose`` 2.5x slower (0.53 s against 0.20 s a scan, measured);
-128 MiB keeps glibc's usual behaviour for our allocation sizes."""
+WORKER_ENV = dict(THREAD_ENV)
+"""The whole environment LocalCluster workers start with; it replaces Dask's default, which sets
+``MALLOC_TRIM_THRESHOLD_=65536``. Setting that variable at all (or any other ``MALLOC_*_`` tunable) turns
+off glibc's dynamic mmap threshold, so every large numpy array is mmapped and unmapped afresh and its pages
+faulted in again: ``decompose`` ran 2.5x slower with 65536 and still 1.25x slower with 128 MiB than in a
+plain process (0.47 s against 0.38 s a scan with two workers busy, measured; docs/batch.md)."""
+WORKER_CONFIG = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "1s",
+    "distributed.admin.system-monitor.interval": "5s",
+    "distributed.worker.memory.monitor-interval": "5s",
+}
+"""Dask settings of LocalCluster workers: no statistical profiler (it samples the task's stack every
+10 ms) and slower housekeeping ticks; together about 8 % of a scan's time on this machine (measured)."""
 SCAN_EXAMPLES_KEY = "scan_examples"
 """Provenance parameter holding how many examples the scan gave (to tell a complete scan on resume)."""
 
