@@ -42,7 +42,7 @@ def _metrics(d, truth, pts, lab):
     def to_frame(p):
         return d.to_output((p - d.root_scan) * d.scale)
 
-    return evaluate(d.hbl, truth, pts[lab == LEAF], to_frame, N_M, N_L)
+    return evaluate(d.hbl, truth, pts[lab == LEAF], to_frame, N_M, N_L, scan_points=pts)
 
 
 def test_leaf_on_meets_the_accuracy_floor(truth, leaf_on):
@@ -50,6 +50,7 @@ def test_leaf_on_meets_the_accuracy_floor(truth, leaf_on):
     m = _metrics(d, truth, pts, lab)
     assert m.counts_ok and m.connected
     assert m.main_fit <= 0.02 and m.main_fit_worst <= 0.03
+    assert m.main_fit_seen <= 0.02 and m.main_precision <= 0.01
     assert m.leaf_cover >= 0.93
     assert m.crossings <= 1
     assert d.hbl.height == pytest.approx(0.8, abs=0.05)

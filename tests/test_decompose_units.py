@@ -214,3 +214,51 @@ def test_compiled_winding_numbers_equal_the_numpy_formula(rng):
     fast, ref = winding_numbers(v, f, q), winding_numbers_reference(v, f, q)
     assert np.allclose(fast, ref, atol=1e-9)
     assert ((fast > 0.5) == (ref > 0.5)).all() and 0 < (fast > 0.5).sum() < len(q)
+
+
+def _box_lobe(lo, hi, pts_index, pts):
+    from arboretum_server.decompose.lobes import convex_hull
+    from arboretum_server.decompose.state import LobeState
+
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], float)
+    v, f = convex_hull(corners)
+    centre = pts[pts_index].mean(axis=0)
+    return LobeState(np.asarray(pts_index), centre, v, f, False, np.zeros((2, 3)), 0, 0)
+
+
+def test_bent_fallback_goes_round_a_wall_that_blocks_every_straight_branch():
+    from arboretum_server.decompose.merge import BranchSet, add_branch, resample_step
+    from arboretum_server.decompose.secondary import bent_fallback, inside_foreign
+    from arboretum_server.decompose.secondary import straight_fallback as straight
+
+    own_pts = np.array([[1.5, 0.0, z] for z in np.linspace(0.1, 1.9, 19)])  # a tall column of foliage
+    wall_pts = np.array([[0.5, 0.0, 0.6]])
+    pts = np.vstack([own_pts, wall_pts])
+    own = _box_lobe((1.0, -0.5, 0.0), (2.0, 0.5, 2.0), np.arange(19), pts)
+    wall = _box_lobe((0.4, -1.0, 0.0), (0.6, 1.0, 1.2), np.array([19]), pts)
+    lobes = [wall, own]
+    mains = BranchSet()
+    add_branch(mains, np.c_[np.zeros(11), np.zeros(11), np.linspace(0.0, 1.0, 11)], -1, -1)
+    assert straight(lobes, 1, mains) is None  # every straight segment hits the wall
+    seg, parent, pv = bent_fallback(lobes, 1, mains, pts)
+    assert parent == 0 and np.allclose(seg[0], mains.segments[0][pv]) and np.allclose(seg[-1], own.centre)
+    assert not inside_foreign(lobes, 1, resample_step(seg, 0.005)).any()
+    assert seg[:, 2].max() > 1.2  # it went over the wall
+
+
+def test_main_fit_seen_treats_tied_lengths_as_interchangeable_and_skips_unseen_wood():
+    from arboretum_server.decompose.evaluate import main_fit_seen
+
+    def branch(d, seen=1.0, n=10):
+        return np.full(n, d), np.arange(n) < seen * n
+
+    # the trunk is found; of two branches 2 % apart in length the extraction found the shorter one
+    per = [branch(0.0), branch(0.1), branch(0.0), branch(0.2)]
+    assert main_fit_seen(per, np.array([1.0, 0.5, 0.49, 0.3]), 2, 1.0) == 0.0
+    # 20 % apart is no tie: the longer one is required, and it was missed
+    assert np.isclose(main_fit_seen(per, np.array([1.0, 0.5, 0.4, 0.3]), 2, 1.0), 0.05)
+    # a branch seen over 30 % of its length ranks by that part and counts only there
+    per = [branch(0.0), (np.r_[np.zeros(3), np.full(7, 0.5)], np.arange(10) < 3), branch(0.1)]
+    assert np.isclose(main_fit_seen(per, np.array([1.0, 0.6, 0.3]), 2, 1.0), 0.05)  # seen 0.18 < 0.3
+    assert np.isclose(main_fit_seen(per, np.array([1.0, 0.6, 0.1]), 2, 1.0), 0.0)  # the seen part: d = 0
+    assert np.isclose(main_fit_seen(per, np.array([1.0, 0.6, 0.5]), 2, 2.0), 0.025)  # 0.5 seen beats 0.18

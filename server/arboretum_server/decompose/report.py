@@ -102,7 +102,7 @@ def synth_figures(species: str, seed: int, case: str, scanner: bool = False, mod
     def to(p):
         return d.to_output((p - d.root_scan) * d.scale)
 
-    m = evaluate(d.hbl, truth, pts[lab == LEAF], to, *o.counts())
+    m = evaluate(d.hbl, truth, pts[lab == LEAF], to, *o.counts(), scan_points=pts)
     return {"model": model, "scanner": scanner, "species": species, "seed": seed, "case": case, "time_s": round(sum(d.timing.values()), 3),
             **{k: round(v, 4) if isinstance(v, float) else v for k, v in m.as_dict().items()}}
 

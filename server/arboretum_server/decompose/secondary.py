@@ -97,16 +97,52 @@ def straight_fallback(lobes: list[LobeState], j: int, mains: BranchSet, tries: i
     box = boxes(lobes)
     for start in range(0, len(order), batch):
         cand = order[start : start + batch]
-        counts = np.maximum(2, np.ceil(dist[cand] / step).astype(int) + 1)
-        which = np.repeat(np.arange(len(cand)), counts)
-        t = np.concatenate([np.linspace(0.0, 1.0, c) for c in counts])[:, None]
-        q = verts[cand][which] + t * (centre - verts[cand][which])
+        q, which = _segment_samples(verts[cand], np.broadcast_to(centre, (len(cand), 3)), step)
         bad = np.bincount(which, weights=inside_foreign(lobes, j, q, box), minlength=len(cand)) > 0
         if not bad.all():
             i = int(cand[int(np.argmin(bad))])
             m = max(2, int(np.ceil(dist[i] / 0.01)) + 1)
             seg = verts[i] + np.linspace(0.0, 1.0, m)[:, None] * (centre - verts[i])
             return seg, int(owner[i, 0]), int(owner[i, 1])
+    return None
+
+
+def _segment_samples(a: np.ndarray, b: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points every ~``step`` along the segments a[i] -> b[i] ((S, 3) each) and the segment of each."""
+    counts = np.maximum(2, np.ceil(np.linalg.norm(b - a, axis=1) / step).astype(int) + 1)
+    which = np.repeat(np.arange(len(a)), counts)
+    t = np.concatenate([np.linspace(0.0, 1.0, c) for c in counts])[:, None]
+    return a[which] + t * (b[which] - a[which]), which
+
+
+def bent_fallback(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, waypoints: int = 32,
+                  tries: int = 96, batch: int = 8, step: float = 0.005) -> tuple[np.ndarray, int, int] | None:
+    """A two-piece secondary branch for lobe ``j``: main-branch vertex -> one of the lobe's own points ->
+    lobe centre, both pieces clear of foreign lobes. The ``tries`` main vertices nearest the centre are
+    tested ``batch`` at a time, nearest first; the first batch with a clear route gives the shortest one.
+    None if none has one. For lobes that no straight segment reaches (lobes around a pine's trunk)."""
+    centre, box = lobes[j].centre, boxes(lobes)
+    members = pts[lobes[j].members]
+    w = members[:: max(1, len(members) // waypoints)]
+    q, which = _segment_samples(w, np.broadcast_to(centre, w.shape), step)
+    w = w[np.bincount(which, weights=inside_foreign(lobes, j, q, box), minlength=len(w)) == 0]
+    if not len(w):
+        return None
+    owner = np.concatenate([np.stack([np.full(len(s), b), np.arange(len(s))], 1) for b, s in enumerate(mains.segments)])
+    verts = np.concatenate(mains.segments)
+    order = np.argsort(np.linalg.norm(verts - centre, axis=1))[:tries]
+    for start in range(0, len(order), batch):
+        v = np.repeat(order[start : start + batch], len(w))  # every (vertex, waypoint) pair of the batch
+        ww = np.tile(w, (len(v) // len(w), 1))
+        q, which = _segment_samples(verts[v], ww, step)
+        bad = np.bincount(which, weights=inside_foreign(lobes, j, q, box), minlength=len(v)) > 0
+        if bad.all():
+            continue
+        length = np.where(bad, np.inf, np.linalg.norm(ww - verts[v], axis=1) + np.linalg.norm(ww - centre, axis=1))
+        k = int(np.argmin(length))
+        a, b = verts[v[k]], ww[k]
+        seg = np.vstack([resample_step(np.stack([a, b]), 0.01), resample_step(np.stack([b, centre]), 0.01)[1:]])
+        return seg, int(owner[v[k], 0]), int(owner[v[k], 1])
     return None
 
 
@@ -162,6 +198,7 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
         smoothed = smooth_polylines([seg], vertex_limits([seg], tree))[0]
         seg = clear_smooth(lobes, j, seg, smoothed, o.step / 2, box, tree)
         if seg is None:
-            seg, parent, pv = straight_fallback(lobes, j, mains) or (smoothed, parent, pv)
+            seg, parent, pv = (straight_fallback(lobes, j, mains) or bent_fallback(lobes, j, mains, pts)
+                               or (smoothed, parent, pv))
         lobes[j] = LobeState(lb.members, lb.centre, lb.hull_vertices, lb.hull_faces, lb.alpha, seg, parent, pv)
     return lobes[len(others):], pred, rerouted
