@@ -19,6 +19,18 @@ def test_curvature_of_straight_and_quarter_circle():
     assert polyline_curvature(arc) == pytest.approx(np.pi / 2, rel=0.02)
     noisy = np.c_[np.random.default_rng(0).normal(0, 0.002, 50), 0 * z, z]
     assert polyline_curvature(noisy) < 0.15  # resampling ignores zig-zag of graph paths
+    t = np.linspace(0, np.pi, 300)
+    assert polyline_curvature(np.c_[1 - np.cos(t), 0 * t, np.sin(t)]) == pytest.approx(np.pi, rel=0.02)
+
+
+def test_wiggles_left_by_smoothed_graph_paths_do_not_make_a_branch_curved():
+    """A straight branch with a 1 %-of-length wiggle of 5 periods: its chords turned by 0.62 rad in all
+    (the total turning angle measured before: between 'straight' and 'curved'); it bows by 0.03."""
+    z = np.linspace(0, 1, 400)
+    wiggly = np.c_[0.01 * np.sin(2 * np.pi * 5 * z), 0 * z, z]
+    assert polyline_curvature(wiggly) < 0.35 / 3
+    bowed = np.c_[0.1 * np.sin(np.pi * z), 0 * z, z]  # bows 10 % of its chord: an arc of 4 atan(0.2)
+    assert polyline_curvature(bowed) == pytest.approx(4 * np.arctan(0.2), rel=0.05)
 
 
 def test_describe_counts_lobes_and_spread():

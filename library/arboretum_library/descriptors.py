@@ -4,10 +4,10 @@ The paper classifies examples by the curvature of the main branch and the number
 search by "dense", "sparse", "straight" and "curved". We fix the meaning of each here, once, so every
 library agrees:
 
-- curvature: total turning angle (radians) of the main branch after resampling it to 8 equal-length
-  segments (scaled by 8/7, so that a circular arc scores its true angle); a straight branch scores 0,
-  a quarter circle pi/2. Resampling makes it insensitive to
-  the zig-zag of graph shortest paths and independent of scale.
+- curvature: how far the main branch bows from the chord between its ends, as the angle (radians) of
+  the circular arc that bows as far (``polyline_curvature``): a straight branch scores 0, a quarter
+  circle pi/2. Smoothing first makes it insensitive to the zig-zag of graph shortest paths, and it is
+  independent of scale.
 - dense / sparse: lobe count at or above ``dense_lobes`` / at or below ``sparse_lobes``.
 - straight / curved: curvature below ``straight_rad`` / above ``curved_rad``.
 """
@@ -39,11 +39,15 @@ class TagThresholds:
 
 
 def polyline_curvature(points: np.ndarray, segments: int = CURVATURE_SEGMENTS) -> float:
-    """Total turning angle (radians) of a polyline ``points`` (N, 3), measured over ``segments``.
+    """How much a polyline ``points`` (N, 3) bends, in radians: the angle of the circular arc that bows
+    as far from its chord, 4 atan(2 s / c) for the largest distance s of the polyline from the chord c
+    between its ends (straight 0, a quarter circle pi/2, a half circle pi).
 
-    The polyline is resampled densely, smoothed with a moving average one segment long (odd reflection
-    at the ends keeps straight lines straight), then resampled to ``segments`` chords, so vertex
-    noise such as the zig-zag of graph shortest paths does not count as curvature.
+    The polyline is first resampled densely and smoothed with a moving average 1/``segments`` of its
+    length long (odd reflection at the ends keeps straight lines straight). Unlike the total turning
+    angle, the bow does not add up the small wiggles that graph shortest paths keep after smoothing,
+    which made every main branch of a scanned tree read as 'curved' (1.0-1.6 rad for branches whose
+    chord is 93-98 % of their length).
     """
     dense_per_segment = 16
     dense = resample_polyline(points, segments * dense_per_segment + 1)
@@ -51,15 +55,14 @@ def polyline_curvature(points: np.ndarray, segments: int = CURVATURE_SEGMENTS) -
     padded = np.concatenate([2 * dense[0] - dense[h:0:-1], dense, 2 * dense[-1] - dense[-2 : -h - 2 : -1]])
     kernel = np.ones(2 * h + 1) / (2 * h + 1)
     smooth = np.stack([np.convolve(padded[:, k], kernel, mode="valid") for k in range(3)], axis=1)
-    pts = resample_polyline(smooth, segments + 1)
-    d = np.diff(pts, axis=0)
-    n = np.linalg.norm(d, axis=1)
-    d = d[n > 1e-12] / n[n > 1e-12, None]
-    if len(d) < 2:
-        return 0.0
-    cos = np.clip((d[:-1] * d[1:]).sum(axis=1), -1.0, 1.0)
-    # Chords of an arc turn by (segments - 1)/segments of its true angle: undo that bias.
-    return float(np.arccos(cos).sum() * segments / (segments - 1))
+    chord = smooth[-1] - smooth[0]
+    c = float(np.linalg.norm(chord))
+    if c <= 1e-12:
+        return 0.0 if np.ptp(smooth, axis=0).max() <= 1e-12 else 2 * np.pi
+    rel = smooth - smooth[0]
+    along = rel @ (chord / c)
+    s = float(np.linalg.norm(rel - along[:, None] * (chord / c), axis=1).max())
+    return float(4.0 * np.arctan(2.0 * s / c))
 
 
 def describe(structure: HBL) -> Descriptors:

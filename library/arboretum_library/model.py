@@ -198,7 +198,8 @@ class Descriptors:
     """Numbers that classify an example (VRTree Fig. 6), computed by ``descriptors.describe``."""
 
     curvature: float
-    """Total turning angle of the main branch in radians, measured over 8 equal-length segments."""
+    """How far the main branch bows from its chord, as the angle in radians of the circular arc that
+    bows as far (``descriptors.polyline_curvature``): 0 straight, pi/2 a quarter circle."""
     lobe_count: int
     """Number of lobes."""
     length: float
