@@ -6,7 +6,8 @@ synth: harmonic-model trees of the six Table 2 species (arboretum_server.synth) 
        a 69-degree missing sector), scored by ``evaluate.evaluate``.
 scanner: the same trees and cases through the shared virtual scanner (``synth.scanner``: 4 stations,
        occlusion, range noise; 40,000 points; the sector is 70 degrees), plus guiding-vector presets.
-Prints one JSON object per line.
+Prints one JSON object per line. ``synth`` and ``scanner`` take seeds after the word (default 1):
+``python -m arboretum_server.decompose.report synth 1 2 3``.
 """
 
 from __future__ import annotations
@@ -117,12 +118,14 @@ def main(argv: list[str]) -> int:
             print(json.dumps(real_figures(scan)), flush=True)
     else:
         scanner = what == "scanner"
+        seeds = [int(a) for a in argv[1:]] or [1]
         runs = [("harmonic", s) for s in SPECIES_COUNTS]
         if scanner:
             runs += [("guiding", s) for s in ("default", "elm", "upward")]
-        for model, species in runs:
-            for case in CASES:
-                print(json.dumps(synth_figures(species, 1, case, scanner, model)), flush=True)
+        for seed in seeds:
+            for model, species in runs:
+                for case in CASES:
+                    print(json.dumps(synth_figures(species, seed, case, scanner, model)), flush=True)
     return 0
 
 
