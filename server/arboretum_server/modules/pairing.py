@@ -99,20 +99,42 @@ def assign_attraction(
     s_hi: float,
     tol: float,
     max_rounds: int = 8,
+    widen: int = 4,
 ) -> np.ndarray:
-    """(Na,) index of the chosen branching point for each attraction point (Na, 3), -1 for none."""
+    """(Na,) index of the chosen branching point for each attraction point (Na, 3), -1 for none.
+
+    Attraction points whose ``k`` nearest branching points all fail the containment test (in a crown
+    of disjoint parts the nearest ones often sit in a neighbouring part) are paired again among their
+    ``widen`` x ``k`` nearest (ours; the paper pairs with the 25 closest only).
+    """
     na = len(attract)
     if na == 0 or len(bp_pos) == 0:
         return np.full(na, -1)
+    choice, blocked = _assign(attract, bp_pos, bp_radius, size, base_radius, crown, k, C, s_lo, s_hi, tol,
+                              max_rounds)
+    left = np.flatnonzero(blocked)
+    if widen > 1 and len(left) and len(bp_pos) > k:
+        choice[left] = _assign(attract[left], bp_pos, bp_radius, size, base_radius, crown, widen * k, C,
+                               s_lo, s_hi, tol, max_rounds, skip=k)[0]
+    return choice
+
+
+def _assign(attract, bp_pos, bp_radius, size, base_radius, crown, k, C, s_lo, s_hi, tol, max_rounds,
+            skip: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(choice (Na,), blocked (Na,) bool: every candidate tried failed the containment test), pairing
+    each attraction point with its ``k`` nearest branching points but the first ``skip``."""
+    na = len(attract)
     k = min(k, len(bp_pos))
     dt, j = cKDTree(bp_pos, leafsize=32, balanced_tree=False).query(
         attract, k=k, workers=-1
     )
     dt, j = dt.reshape(na, k), j.reshape(na, k)
     best_mod, s, feasible = choose_modules(dt, bp_radius, size, base_radius, s_lo, s_hi, gather=j)
+    feasible[:, :skip] = False
     sigma = pair_cost(dt, size[best_mod] * s, feasible, C)
     order = np.argsort(sigma, axis=1, kind="stable")
     choice = np.full(na, -1)
+    blocked = np.zeros(na, bool)
     todo = np.arange(na)
     for r in range(min(max_rounds, k)):
         cand = order[todo, r]
@@ -122,5 +144,7 @@ def assign_attraction(
             break
         ok = segments_stay_inside(crown, bp_pos[j[todo, cand]], attract[todo], tol)
         choice[todo[ok]] = j[todo[ok], cand[ok]]
+        blocked[todo[~ok]] = True
+        blocked[todo[ok]] = False
         todo = todo[~ok]
-    return choice
+    return choice, blocked & (choice < 0)

@@ -76,7 +76,8 @@ def _fits(crown, skel, pos, R, scale, direction, entry, tol) -> np.ndarray:
     world = pos[:, None] + scale[:, None, None] * np.einsum("nij,nsj->nsi", R, skel)
     d = crown_sdf(crown, world.reshape(-1, 3)).reshape(world.shape[:2])
     along = ((world - pos[:, None]) * direction[:, None]).sum(-1)
-    return ((d <= tol) | (along < entry[:, None])).all(axis=1)
+    enters = (along >= entry[:, None]).any(axis=1) & (d <= 0).any(axis=1)  # else no branching point survives
+    return ((d <= tol) | (along < entry[:, None])).all(axis=1) & enters
 
 
 def choose_final(
