@@ -230,3 +230,14 @@ def test_local_workers_keep_glibc_malloc_defaults_and_no_profiler():
     assert not [k for k in env if k.startswith("MALLOC_")]
     assert env["OMP_NUM_THREADS"] == "1" and env["OPENBLAS_NUM_THREADS"] == "1" and env["OMP_WAIT_POLICY"] == "PASSIVE"
     assert seen[0]["profile"] is False
+
+
+def test_workers_start_without_a_trim_threshold_left_in_the_parent(monkeypatch):
+    """A default LocalCluster's nanny leaves MALLOC_TRIM_THRESHOLD_=65536 in its process's environment."""
+    from arboretum_server.batch.build import _Cluster
+
+    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")
+    with _Cluster(BuildOptions(workers=1)) as (client, _, _):
+        env = next(iter(client.run(_worker_settings).values()))["env"]
+        assert "MALLOC_TRIM_THRESHOLD_" not in os.environ
+    assert "MALLOC_TRIM_THRESHOLD_" not in env and os.environ["MALLOC_TRIM_THRESHOLD_"] == "65536"

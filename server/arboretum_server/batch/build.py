@@ -29,7 +29,14 @@ from arboretum_library.errors import InputError
 from arboretum_library.pointio import READERS
 from arboretum_library.progress import ProgressFn, no_progress
 
-from .tasks import SCAN_EXAMPLES_KEY, WORKER_CONFIG, WORKER_ENV, ScanOutcome, decompose_scan
+from .tasks import (
+    MALLOC_STATIC,
+    SCAN_EXAMPLES_KEY,
+    WORKER_CONFIG,
+    WORKER_ENV,
+    ScanOutcome,
+    decompose_scan,
+)
 
 
 @dataclass(frozen=True)
@@ -221,6 +228,7 @@ class _Cluster:
         self.o = o
         self.cluster: Any = None
         self.client: Any = None
+        self.hidden: dict[str, str] = {}
 
     def __enter__(self) -> tuple[Any, str, int]:
         from distributed import Client, LocalCluster
@@ -235,6 +243,9 @@ class _Cluster:
         import dask
 
         # Replaces Dask's worker environment: its MALLOC_TRIM_THRESHOLD_ made decompose 2.5x slower (tasks.py).
+        # Workers inherit this process's environment, where an earlier default LocalCluster's nanny may
+        # have left that variable (nannies os.environ.update() their pre-spawn environment): hide it.
+        self.hidden = {k: os.environ.pop(k) for k in MALLOC_STATIC if k in os.environ}
         with dask.config.set({"distributed.nanny.pre-spawn-environ": dict(WORKER_ENV), **WORKER_CONFIG}):
             self.cluster = LocalCluster(n_workers=self.o.workers, threads_per_worker=1, processes=True,
                                         dashboard_address=None)
@@ -246,4 +257,5 @@ class _Cluster:
             self.client.close()
         if self.cluster is not None:
             self.cluster.close()
+        os.environ.update(self.hidden)
 

@@ -27,6 +27,8 @@ WORKER_ENV = dict(THREAD_ENV)
 off glibc's dynamic mmap threshold, so every large numpy array is mmapped and unmapped afresh and its pages
 faulted in again: ``decompose`` ran 2.5x slower with 65536 and still 1.25x slower with 128 MiB than in a
 plain process (0.47 s against 0.38 s a scan with two workers busy, measured; docs/batch.md)."""
+MALLOC_STATIC = ("MALLOC_TRIM_THRESHOLD_", "MALLOC_TOP_PAD_", "MALLOC_MMAP_THRESHOLD_", "MALLOC_MMAP_MAX_")
+"""The glibc tunables whose setting turns the dynamic mmap threshold off; LocalCluster workers start without."""
 WORKER_CONFIG = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.tick.interval": "1s",
