@@ -133,79 +133,68 @@ def grow_modular_tree(
         trunks[0] if trunk is None and len(trunks) else (pm.branches[0] if trunk is None else trunk)
     )
     T0 = np.eye(4) if T_world_trunk is None else np.asarray(T_world_trunk, dtype=np.float64)
-    box = np.concatenate([modules.modules[trunk].vertices @ T0[:3, :3].T + T0[:3, 3], crown.bounds])
-    axis = float(np.ptp(box, axis=0).max())
-    C, d_kill, tol = (
-        o.saturation_fraction * axis,
-        o.kill_fraction * axis,
-        o.crown_tolerance_fraction * axis,
-    )
-    attract = sample_attraction_points(crown, o.n_interior, o.n_surface, rng)
-    inst = {
-        "module": [trunk],
-        "T": [T0],
-        "parent": [-1],
-        "depth": [0],
-        "scale": [1.0],
-        "r_p": [np.nan],
-        "r_c": [
-            modules.modules[trunk].skeleton.base_radius * float(np.cbrt(np.linalg.det(T0[:3, :3])))
-        ],
-        "t_p": [np.full(3, np.nan)],
-        "dir": [T0[:3, 2] / np.linalg.norm(T0[:3, 2])],
-        "entry": [0.0],
-    }
-    pool = _trunk_pool(pm.branch_points[trunk], T0, crown, o, rng)
-    alive = _far_from(
-        attract, modules.modules[trunk].skeleton.points @ T0[:3, :3].T + T0[:3, 3], d_kill
-    )
+    g = _start(modules, crown, o, rng, pm, trunk, T0)
     iterations = 0
     for it in range(o.max_iterations):
-        live = np.flatnonzero(alive)
-        if len(live) == 0 or len(pool.owner) == 0:
-            break
-        points = pool.points
-        assign = assign_attraction(
-            attract[live],
-            np.ascontiguousarray(points.position),
-            points.radius,
-            pm.size,
-            pm.base_radius,
-            crown,
-            k=o.neighbours,
-            C=C,
-            s_lo=o.scale_lower,
-            s_hi=o.scale_upper,
-            tol=tol,
-        )
-        if not (assign >= 0).any():
-            break
-        pl = local_step(
-            assign,
-            attract[live],
-            points,
-            crown,
-            pm.size,
-            pm.base_radius,
-            pm.skeleton,
-            o.surface_weight * o.surface_weight_decay**it,
-            (np.radians(o.angle_lower_deg), np.radians(o.angle_upper_deg)),
-            o.direction_bias,
-            o.scale_lower,
-            o.scale_upper,
-            tol,
-            rng,
-        )
-        if len(pl.module) == 0:
+        if not g.alive.any() or len(g.pool.owner) == 0 or not _layer(g, modules, crown, o, rng, pm, it):
             break
         iterations = it + 1
-        first = len(inst["module"])
-        grown = _record(inst, pl, pool, pm.branches, pm.base_radius, it + 1)
-        pool = _next_pool(pool, pl.branch_point, grown, first, pm, crown, o, rng)
-        new_sk, _ = _placed([modules.modules[m].skeleton.points for m, _ in grown], grown)
-        live = np.flatnonzero(alive)
-        alive[live] = _far_from(attract[live], new_sk, d_kill)
-    return _finish(inst, modules, crown, o, attract, alive, iterations, tol)
+    return _finish(g.inst, modules, crown, o, g.attract, g.alive, iterations, g.tol)
+
+
+@dataclass
+class _Growth:
+    """The state of a growing tree between layers."""
+
+    inst: dict
+    """Per-instance lists (module, T, parent, depth, scale, r_p, r_c, t_p, dir, entry)."""
+    pool: _Pool
+    attract: np.ndarray
+    """(A, 3) attraction points."""
+    alive: np.ndarray
+    """(A,) bool: not yet reached (farther than d_k from every branch)."""
+    C: float
+    d_kill: float
+    tol: float
+
+
+def _start(modules, crown, o, rng, pm, trunk: int, T0: np.ndarray) -> _Growth:
+    """The trunk placed by ``T0``, its branching points and the attraction points it has not reached."""
+    box = np.concatenate([modules.modules[trunk].vertices @ T0[:3, :3].T + T0[:3, 3], crown.bounds])
+    axis = float(np.ptp(box, axis=0).max())
+    attract = sample_attraction_points(crown, o.n_interior, o.n_surface, rng)
+    r_c = modules.modules[trunk].skeleton.base_radius * float(np.cbrt(np.linalg.det(T0[:3, :3])))
+    inst = {"module": [trunk], "T": [T0], "parent": [-1], "depth": [0], "scale": [1.0], "r_p": [np.nan],
+            "r_c": [r_c], "t_p": [np.full(3, np.nan)], "dir": [T0[:3, 2] / np.linalg.norm(T0[:3, 2])],
+            "entry": [0.0]}
+    pool = _trunk_pool(pm.branch_points[trunk], T0, crown, o, rng)
+    d_kill = o.kill_fraction * axis
+    alive = _far_from(attract, modules.modules[trunk].skeleton.points @ T0[:3, :3].T + T0[:3, 3], d_kill)
+    return _Growth(inst, pool, attract, alive, o.saturation_fraction * axis, d_kill,
+                   o.crown_tolerance_fraction * axis)
+
+
+def _layer(g: _Growth, modules, crown, o, rng, pm, it: int) -> bool:
+    """One layer (global step, local step, new branching points, kill); False if nothing was placed."""
+    live = np.flatnonzero(g.alive)
+    points = g.pool.points
+    assign = assign_attraction(g.attract[live], np.ascontiguousarray(points.position), points.radius, pm.size,
+                               pm.base_radius, crown, k=o.neighbours, C=g.C, s_lo=o.scale_lower,
+                               s_hi=o.scale_upper, tol=g.tol)
+    if not (assign >= 0).any():
+        return False
+    pl = local_step(assign, g.attract[live], points, crown, pm.size, pm.base_radius, pm.skeleton,
+                    o.surface_weight * o.surface_weight_decay**it,
+                    (np.radians(o.angle_lower_deg), np.radians(o.angle_upper_deg)), o.direction_bias,
+                    o.scale_lower, o.scale_upper, g.tol, rng)
+    if len(pl.module) == 0:
+        return False
+    first = len(g.inst["module"])
+    grown = _record(g.inst, pl, g.pool, pm.branches, pm.base_radius, it + 1)
+    g.pool = _next_pool(g.pool, pl.branch_point, grown, first, pm, crown, o, rng)
+    new_sk, _ = _placed([modules.modules[m].skeleton.points for m, _ in grown], grown)
+    g.alive[live] = _far_from(g.attract[live], new_sk, g.d_kill)
+    return True
 
 
 def _trunk_pool(
