@@ -165,3 +165,11 @@ def summary(con: sqlite3.Connection) -> dict:
     species = dict(con.execute("SELECT species, COUNT(*) FROM examples GROUP BY species ORDER BY species"))
     tags = dict(con.execute("SELECT tag, COUNT(*) FROM tags GROUP BY tag ORDER BY tag"))
     return {"examples": int(n), "size_bytes": int(size), "species": species, "tags": tags}
+
+
+def curvature_by_species(con: sqlite3.Connection) -> dict[str, list[float]]:
+    """Main-branch curvatures of every example, per species."""
+    out: dict[str, list[float]] = {}
+    for species, curvature in con.execute("SELECT species, curvature FROM examples"):
+        out.setdefault(species, []).append(float(curvature))
+    return out

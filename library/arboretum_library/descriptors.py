@@ -9,7 +9,11 @@ library agrees:
   circle pi/2. Smoothing first makes it insensitive to the zig-zag of graph shortest paths, and it is
   independent of scale.
 - dense / sparse: lobe count at or above ``dense_lobes`` / at or below ``sparse_lobes``.
-- straight / curved: curvature below ``straight_rad`` / above ``curved_rad``.
+- straight / curved: within a library, relative to the examples of the same species once there are
+  ``RELATIVE_MIN`` of them: at or below the lower tercile of their curvatures / at or above the upper
+  one (``relative_curvature_tags``), so the keywords split any library into its straighter and curvier
+  thirds. Below that, and as stored with each example, the fixed ``TagThresholds``: curvature below
+  ``straight_rad`` / above ``curved_rad``.
 """
 
 from __future__ import annotations
@@ -22,6 +26,9 @@ from .geometry import point_polyline_distance, resample_polyline
 from .model import HBL, Descriptors
 
 CURVATURE_SEGMENTS = 8
+RELATIVE_MIN = 6
+"""Examples of one species a library needs before 'straight' and 'curved' become relative to them."""
+CURVATURE_TAGS = ("straight", "curved")
 
 
 @dataclass(frozen=True)
@@ -91,3 +98,23 @@ def tags_for(d: Descriptors, t: TagThresholds = TagThresholds()) -> tuple[str, .
     if d.curvature > t.curved_rad:
         tags.append("curved")
     return tuple(tags)
+
+
+def tercile_bounds(curvature: np.ndarray, minimum: int = RELATIVE_MIN) -> tuple[float, float] | None:
+    """(lower, upper) terciles of ``curvature`` (N,), or None with fewer than ``minimum`` values."""
+    c = np.asarray(curvature, dtype=np.float64)
+    if len(c) < minimum:
+        return None
+    return float(np.quantile(c, 1 / 3)), float(np.quantile(c, 2 / 3))
+
+
+def relative_curvature_tags(tags: tuple[str, ...], curvature: float, bounds: tuple[float, float] | None,
+                            t: TagThresholds = TagThresholds()) -> tuple[str, ...]:
+    """``tags`` with 'straight'/'curved' decided by the species' tercile ``bounds`` (None: by ``t``)."""
+    lo, hi = bounds if bounds is not None else (np.nextafter(t.straight_rad, -np.inf), np.nextafter(t.curved_rad, np.inf))
+    new = "straight" if curvature <= lo else "curved" if curvature >= hi else None
+    at = next((i for i, x in enumerate(tags) if x in CURVATURE_TAGS), len(tags))  # keep the tag's place
+    out = [x for x in tags if x not in CURVATURE_TAGS]
+    if new is not None:
+        out.insert(min(at, len(out)), new)
+    return tuple(out)

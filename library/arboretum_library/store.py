@@ -23,11 +23,15 @@ import re
 import shutil
 import sqlite3
 from collections.abc import Iterable, Iterator
+from dataclasses import replace as with_fields
 from pathlib import Path
+
+import numpy as np
 
 from . import catalog
 from . import search as _search
 from .catalog import SCHEMA_VERSION, Entry
+from .descriptors import CURVATURE_TAGS, relative_curvature_tags, tercile_bounds
 from .errors import InputError, StoreError
 from .folders import (
     encode,
@@ -102,18 +106,32 @@ class Library:
         return isinstance(id_, str) and catalog.get(self._con, id_) is not None
 
     def entry(self, id_: str) -> Entry:
-        """The catalog row of ``id_`` (no arrays loaded)."""
+        """The catalog row of ``id_`` (no arrays loaded), with the library's 'straight'/'curved' (``entries``)."""
         e = catalog.get(self._con, id_)
         if e is None:
             raise StoreError(f"no example {id_!r} in library {self.root}")
-        return e
+        return self._relative([e])[0]
 
     def entries(self, **filters) -> list[Entry]:
         """Catalog rows passing ``filters``, by id: ``species``, ``tags`` (all of them), ``min_lobes``,
-        ``max_lobes``, ``min_curvature``, ``max_curvature`` (radians; ranges inclusive)."""
+        ``max_lobes``, ``min_curvature``, ``max_curvature`` (radians; ranges inclusive).
+
+        'straight' and 'curved' are relative to the library: the straighter and curvier thirds of each
+        species with enough examples (``descriptors.relative_curvature_tags``); the rows carry these.
+        """
         tags = filters.get("tags") or ()
-        filters["tags"] = (tags,) if isinstance(tags, str) else tuple(tags)
-        return catalog.select(self._con, **filters)
+        want = tuple(t.lower() for t in ((tags,) if isinstance(tags, str) else tags))
+        filters["tags"] = tuple(t for t in want if t not in CURVATURE_TAGS)
+        rows = self._relative(catalog.select(self._con, **filters))
+        return [e for e in rows if all(t in e.tags for t in want if t in CURVATURE_TAGS)]
+
+    def _relative(self, rows: list[Entry]) -> list[Entry]:
+        """``rows`` with 'straight'/'curved' decided by the terciles of their species in the library."""
+        if not rows:
+            return rows
+        bounds = {k: tercile_bounds(np.array(v)) for k, v in catalog.curvature_by_species(self._con).items()}
+        return [with_fields(e, tags=relative_curvature_tags(e.tags, e.descriptors.curvature, bounds.get(e.species)))
+                for e in rows]
 
     def get(self, id_: str) -> Example:
         """Load example ``id_`` whole. ``StoreError`` names the id when missing, the file when broken."""
@@ -128,7 +146,13 @@ class Library:
 
     def info(self) -> dict:
         """Counts per species and tag, number of examples, bytes of example folders."""
-        return {"path": str(self.root), "schema": SCHEMA_VERSION, **catalog.summary(self._con)}
+        info = catalog.summary(self._con)
+        counts = {k: v for k, v in info["tags"].items() if k not in CURVATURE_TAGS}
+        for e in self.entries():
+            for t in e.tags:
+                if t in CURVATURE_TAGS:
+                    counts[t] = counts.get(t, 0) + 1
+        return {"path": str(self.root), "schema": SCHEMA_VERSION, **info, "tags": dict(sorted(counts.items()))}
 
     def search(self, query: str | Iterable[str] = "", limit: int | None = None,
                **filters) -> list[_search.SearchHit]:
