@@ -284,12 +284,24 @@ def lod_closeup(tree_bounds: np.ndarray, lobe_centre: np.ndarray, aspect: float)
 
 
 def grown_scene(mesh) -> Scene:
-    """Bark (brown) and leaf cards (green) of a TreeMesh."""
-    bark = Mesh(vertices=f32(mesh.bark.positions), faces=np.asarray(mesh.bark.faces, np.int32), color=f32(BARK_RGB))
-    items = [bark]
-    if len(mesh.leaves.faces):
-        items.append(Mesh(vertices=f32(mesh.leaves.positions), faces=np.asarray(mesh.leaves.faces, np.int32),
-                          color=f32(FOLIAGE_RGB)))
+    """Bark and leaf cards of a TreeMesh: textured with the tree's materials (tiling bark, leaves cut
+    out of their cards at the texture's alpha) where the parts carry UVs, else flat brown and green."""
+    from io import BytesIO
+
+    from arboretum_server.mesh.scene import tree_materials
+
+    materials, items = tree_materials(), []
+    for part, rgb in ((mesh.bark, BARK_RGB), (mesh.leaves, FOLIAGE_RGB)):
+        if not len(part.faces):
+            continue
+        mat, look = materials[part.material], {}
+        if part.uv is not None and mat.texture_png:
+            texture = np.asarray(Image.open(BytesIO(mat.texture_png)).convert("RGBA"))
+            normals = None if part.normals is None else f32(part.normals)
+            look = {"uv": f32(part.uv), "texture": texture, "normals": normals, "double_sided": mat.double_sided,
+                    "alpha_cutoff": mat.alpha_cutoff or 0.0}
+            rgb = mat.base_color[:3]
+        items.append(Mesh(vertices=f32(part.positions), faces=np.asarray(part.faces, np.int32), color=f32(rgb), **look))
     return with_grid(items)
 
 

@@ -4,7 +4,8 @@ INPUT may be a point cloud (.xyz/.txt/.pts/.csv text with x y z first, .las/.laz
 face-less .ply; read by ``arboretum_library.pointio``),
 an HBL or Example record (.npz written by ``arboretum_library.codec.save_record``), a triangle mesh
 (.ply with faces, .obj), or a binary glTF (.glb: grown trees, instanced module trees; read by
-``arboretum_library.export.gltf_read``). Several inputs are drawn together. Rendering is headless (EGL).
+``arboretum_library.export.gltf_read``; drawn with its textures, alpha modes and double-sidedness
+unless ``--no-textures``). Several inputs are drawn together. Rendering is headless (EGL).
 """
 
 from __future__ import annotations
@@ -29,6 +30,8 @@ def register(subparsers) -> None:
     p.add_argument("--size", default="1280x720", help="image size WIDTHxHEIGHT (default 1280x720)")
     p.add_argument("--points", action="store_true", help="also draw an HBL's source points by label")
     p.add_argument("--no-grid", action="store_true", help="leave out the ground grid")
+    p.add_argument("--no-textures", action="store_true",
+                   help="draw GLB materials in one flat colour each (the texture's mean) instead of textured")
     add_json_flag(p)
     p.set_defaults(func=run)
 
@@ -51,7 +54,8 @@ def run(args: argparse.Namespace) -> int:
     size = parse_size(args.size)
     t0 = time.perf_counter()
     style = HBLStyle(show_points=args.points, grid=False)
-    scene = combine(*(load_scene(Path(p), style) for p in args.inputs), grid=not args.no_grid)
+    textures = not getattr(args, "no_textures", False)
+    scene = combine(*(load_scene(Path(p), style, textures) for p in args.inputs), grid=not args.no_grid)
     with OffscreenRenderer(size) as r:
         image = r.render(scene, view=args.view)
         stats = r.renderer.stats
@@ -64,8 +68,9 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def load_scene(path: Path, style):
-    """A Scene for one input file, chosen by its extension (and content for .ply)."""
+def load_scene(path: Path, style, textures: bool = True):
+    """A Scene for one input file, chosen by its extension (and content for .ply); a GLB's meshes are
+    textured unless ``textures`` is False."""
     from .scene_build import glb_scene, hbl_scene, mesh_scene, points_scene
 
     if not path.is_file():
@@ -74,7 +79,7 @@ def load_scene(path: Path, style):
     if ext == ".glb":
         from arboretum_library.export.gltf_read import read_glb
 
-        return glb_scene(read_glb(path), grid=False)
+        return glb_scene(read_glb(path), grid=False, textures=textures, source=str(path))
     if ext == ".gltf":
         raise InputError(f"{path}: only binary glTF (.glb) is read; save it as .glb")
     if ext == ".npz":

@@ -87,15 +87,28 @@ class Polyline:
 
 @dataclass(frozen=True, eq=False)
 class Mesh:
-    """A triangle mesh with one colour; translucent when ``color[3] < 1``."""
+    """A triangle mesh with one colour, optionally textured; translucent when ``color[3] < 1``."""
 
     vertices: F32
     """(V, 3) float32, metres."""
     faces: I32
     """(F, 3) int32 indices into ``vertices``, counter-clockwise seen from outside."""
     color: F32 = field(default_factory=lambda: np.array([0.7, 0.7, 0.7, 1.0], np.float32))
-    """(4,) float32 RGBA."""
+    """(4,) float32 RGBA; multiplies the texture's colour when there is one."""
     pick_id: int = 0
+    normals: F32 | None = None
+    """(V, 3) float32 unit vertex normals, or None for area-weighted ones from ``faces``."""
+    uv: F32 | None = None
+    """(V, 2) float32 texture coordinates, glTF convention: (0, 0) is the image's top-left texel,
+    v grows downwards; the texture repeats outside 0..1. Needed when ``texture`` is given."""
+    texture: NDArray[np.uint8] | None = None
+    """(H, W, 4) uint8 RGBA, top row first, or None. An array that is already read-only is kept as
+    it is (not copied), so meshes made from one array share one GPU texture."""
+    alpha_cutoff: float = 0.5
+    """Texels whose alpha is below this are cut out (not drawn, not pickable): glTF alphaMode MASK.
+    0 draws every texel (glTF OPAQUE); only the texture's alpha is compared, never ``color[3]``."""
+    double_sided: bool = True
+    """Draw both faces of every triangle (glTF doubleSided); False culls the faces seen from behind."""
 
     def __post_init__(self) -> None:
         verts = _array(self, "vertices", np.float32, (None, 3))
@@ -103,10 +116,35 @@ class Mesh:
         _rgba(self, "color")
         if faces.size and (faces.min() < 0 or faces.max() >= len(verts)):
             raise ValidationError(f"Mesh.faces: indices must lie in 0..{len(verts) - 1}")
+        if self.normals is not None:
+            _array(self, "normals", np.float32, (len(verts), 3))
+        if self.uv is not None:
+            _array(self, "uv", np.float32, (len(verts), 2))
+        if self.texture is not None:
+            _texture(self, "texture")
+            if self.uv is None:
+                raise ValidationError("Mesh.uv: a textured mesh needs (V, 2) texture coordinates, got None")
+        if not (np.isfinite(self.alpha_cutoff) and 0.0 <= self.alpha_cutoff <= 1.0):
+            raise ValidationError(f"Mesh.alpha_cutoff: {self.alpha_cutoff} is not in 0..1")
 
     @property
     def translucent(self) -> bool:
         return bool(self.color[3] < 1.0)
+
+
+def _texture(owner: object, name: str) -> None:
+    """Check ``owner.name`` is an (H, W, 4) uint8 image; keep it when already read-only, else copy."""
+    img = getattr(owner, name)
+    kind = type(owner).__name__
+    if not isinstance(img, np.ndarray) or img.dtype != np.uint8:
+        raise ValidationError(f"{kind}.{name}: expected a uint8 numpy array, got "
+                              f"{getattr(img, 'dtype', type(img).__name__)}")
+    if img.ndim != 3 or img.shape[2] != 4 or img.shape[0] < 1 or img.shape[1] < 1:
+        raise ValidationError(f"{kind}.{name}: bad shape {img.shape}, expected (H, W, 4) RGBA")
+    if img.flags.writeable or not img.flags.c_contiguous:
+        img = np.array(img, copy=True, order="C")
+        img.flags.writeable = False
+        object.__setattr__(owner, name, img)
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,11 +152,12 @@ class InstancedMesh:
     """One opaque mesh drawn N times (one draw call), e.g. leaves or modules."""
 
     mesh: Mesh
-    """The shared mesh (its colour is used where ``colors`` is None)."""
+    """The shared mesh (its colour is used where ``colors`` is None; its texture, cutoff and
+    sidedness apply to every instance)."""
     matrices: F32
     """(N, 4, 4) float32: T_world_instance for each instance (row-major, column vectors)."""
     colors: F32 | None = None
-    """(N, 3) float32 RGB per instance, or None for ``mesh.color``."""
+    """(N, 3) float32 RGB per instance (multiplying the texture), or None for ``mesh.color``."""
 
     def __post_init__(self) -> None:
         m = _array(self, "matrices", np.float32, (None, 4, 4))

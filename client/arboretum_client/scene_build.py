@@ -8,6 +8,7 @@ leaf green). Pick ids are assigned in order and named in ``Scene.names`` ('branc
 from __future__ import annotations
 
 import dataclasses
+import io
 from dataclasses import dataclass
 
 import numpy as np
@@ -113,33 +114,80 @@ def texture_mean_color(image: bytes) -> np.ndarray:
     return (rgba[..., :3].reshape(-1, 3) * alpha).sum(axis=0) / max(float(alpha.sum()), 1e-9)
 
 
-def glb_items(meshes, first_id: int = 1):
+def glb_items(meshes, first_id: int = 1, textures: bool = False, source: str = "GLB"):
     """Items and id names for ``GltfMesh`` records (``arboretum_library.export.gltf_read``).
 
-    Each is drawn in its material's colour (baseColorFactor times the texture's mean colour; no
-    texturing). A mesh placed K > 1 times becomes one ``InstancedMesh`` (one draw call); placed once,
-    or translucent (alphaMode BLEND), it is baked into one world-frame ``Mesh``. The renderer draws both
-    faces of every triangle, lit from either side, so double-sided leaf cards need nothing special.
+    Flat (``textures`` False): each is drawn in its material's colour (baseColorFactor times the
+    texture's mean colour), both faces lit. Textured: with its texture, UVs, normals, alpha mode (MASK:
+    cut out below 0.5) and sidedness; identical embedded images are decoded once and shared, so the
+    renderer uploads them once (``source`` names the file in errors). A mesh placed K > 1 times becomes
+    one ``InstancedMesh`` (one draw call); placed once, or translucent (alphaMode BLEND), it is baked
+    into one world-frame ``Mesh``.
     """
-    items, names = [], {}
+    items, names, images = [], {}, {}
     for g in (g for g in meshes if len(g.faces)):
         pid = first_id + len(items)
         rgb = g.base_color[:3] * (texture_mean_color(g.texture) if g.texture is not None else 1.0)
         color = _f32((*np.clip(rgb, 0.0, 1.0), g.base_color[3] if g.alpha_mode == "BLEND" else 1.0))
         if len(g.instances) > 1 and color[3] >= 1.0:
-            items.append(InstancedMesh(Mesh(_f32(g.positions), g.faces, color, pid), _f32(g.instances)))
+            item = InstancedMesh(Mesh(_f32(g.positions), g.faces, color, pid), _f32(g.instances))
         else:
             verts = np.concatenate([g.positions @ T[:3, :3].T + T[:3, 3] for T in g.instances])
             faces = (g.faces[None] + len(g.positions) * np.arange(len(g.instances))[:, None, None]).reshape(-1, 3)
-            items.append(Mesh(_f32(verts), faces.astype(np.int32), color, pid))
+            item = Mesh(_f32(verts), faces.astype(np.int32), color, pid)
+        items.append(_textured(item, g, images, source) if textures else item)
         names[pid] = g.name
     return items, names
 
 
-def glb_scene(meshes, grid: bool = True) -> Scene:
-    """A Scene of the meshes read from a GLB (``gltf_read.read_glb``), with a ground grid when ``grid``."""
-    items, names = glb_items(meshes)
+def glb_scene(meshes, grid: bool = True, textures: bool = False, source: str = "GLB") -> Scene:
+    """A Scene of the meshes read from a GLB (``gltf_read.read_glb``), with a ground grid when ``grid``
+    (textured as ``glb_items``)."""
+    items, names = glb_items(meshes, textures=textures, source=source)
     return _with_grid(Scene(items=tuple(items), names=names), grid)
+
+
+def _textured(item, g, images: dict[bytes, np.ndarray], source: str):
+    """``item`` (a Mesh or InstancedMesh made from GltfMesh ``g``) textured like ``g``'s material."""
+    if g.texture is None or g.uvs is None:
+        return item
+    if g.texture not in images:
+        images[g.texture] = decode_texture(g.texture, source)
+    instanced = isinstance(item, InstancedMesh)
+    mesh = item.mesh if instanced else item
+    k = 1 if instanced else len(g.instances)  # a baked mesh holds its K placements, in order
+    normals = None if g.normals is None else _placed_normals(g.normals, None if instanced else g.instances)
+    rgb = np.clip(g.base_color[:3], 0.0, 1.0)
+    textured = dataclasses.replace(
+        mesh, color=np.array([*rgb, mesh.color[3]], np.float32), uv=np.tile(g.uvs, (k, 1)),
+        texture=images[g.texture], normals=normals, double_sided=bool(g.double_sided),
+        alpha_cutoff=0.5 if g.alpha_mode == "MASK" else 0.0)
+    return dataclasses.replace(item, mesh=textured) if instanced else textured
+
+
+def _placed_normals(normals: np.ndarray, instances: np.ndarray | None) -> np.ndarray:
+    """Normals (V, 3) as they are (``instances`` None), or under each of (K, 4, 4) ``instances``
+    (inverse-transpose, renormalised) stacked to (K * V, 3), matching a baked mesh's vertices."""
+    if instances is None:
+        return np.asarray(normals, np.float32)
+    out = np.concatenate([normals @ np.linalg.inv(T[:3, :3]) for T in instances])
+    return (out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)).astype(np.float32)
+
+
+def decode_texture(data: bytes, source: str = "GLB") -> np.ndarray:
+    """An embedded PNG/JPEG image as a read-only (H, W, 4) uint8 RGBA array; InputError naming ``source``
+    if unreadable."""
+    from PIL import Image, UnidentifiedImageError
+
+    from arboretum_library.errors import InputError
+
+    try:
+        with Image.open(io.BytesIO(data)) as im:
+            rgba = np.array(im.convert("RGBA"), np.uint8)
+    except (UnidentifiedImageError, OSError, ValueError) as exc:
+        raise InputError(f"{source}: an embedded texture is not a readable PNG or JPEG image ({exc})") from None
+    rgba.flags.writeable = False
+    return rgba
 
 
 def _f32(values) -> np.ndarray:

@@ -15,6 +15,8 @@ import numpy as np
 PROGRAMS: dict[str, tuple[str, ...]] = {
     "lit": ("lit.vert.glsl", "lit.frag.glsl"),
     "instanced": ("instanced.vert.glsl", "lit.frag.glsl"),
+    "textured": ("lit.vert.glsl", "lit.frag.glsl"),
+    "textured_instanced": ("instanced.vert.glsl", "lit.frag.glsl"),
     "points": ("points.vert.glsl", "points.frag.glsl"),
     "lines": ("lines.vert.glsl", "lines.geom.glsl", "flat.frag.glsl"),
     "background": ("background.vert.glsl", "background.frag.glsl"),
@@ -23,7 +25,10 @@ PROGRAMS: dict[str, tuple[str, ...]] = {
 }
 """Program name -> (vertex, [geometry,] fragment) shader file names."""
 
-PICKABLE = ("lit", "instanced", "points", "lines")
+DEFINES: dict[str, tuple[str, ...]] = {"textured": ("TEXTURED",), "textured_instanced": ("TEXTURED",)}
+"""Program name -> preprocessor symbols it is compiled with (one source, several variants)."""
+
+PICKABLE = ("lit", "instanced", "textured", "textured_instanced", "points", "lines")
 
 
 INCLUDE = "//#include "
@@ -60,7 +65,7 @@ def _read(name: str) -> str:
 def build_program(ctx: moderngl.Context, name: str, pick: bool = False) -> moderngl.Program:
     """Compile program ``name`` (a key of ``PROGRAMS``); ``pick`` selects the ID-buffer variant."""
     files = PROGRAMS[name]
-    defines = ("PICK",) if pick else ()
+    defines = DEFINES.get(name, ()) + (("PICK",) if pick else ())
     return ctx.program(vertex_shader=shader_source(files[0], defines),
                        fragment_shader=shader_source(files[-1], defines),
                        geometry_shader=shader_source(files[1], defines) if len(files) == 3 else None)

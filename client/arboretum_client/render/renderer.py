@@ -2,11 +2,13 @@
 
 It always draws into its own framebuffer, so a window and EGL differ only by the context. Passes:
 1. background gradient (no depth); 2. ground grid; 3. opaque batches (tubes, meshes, instanced meshes,
-points, lines); 3b. billboards (textured, alpha-blended, one call each); 4. translucent meshes, sorted far to near by centre, alpha-blended with depth writes off,
-each drawn back faces first then front faces. Anti-aliasing is MSAA when the context offers it,
-else 2x supersampling downscaled on read-back. Picking renders the same opaque and translucent batches
-with integer-output programs into an R32I buffer (nearest surface wins), on demand; billboards are not
-in it (not pickable). A billboard's texture is uploaded once per image and cached across uploads.
+points, lines; textured meshes cut out texels below their alpha cutoff); 3b. billboards (textured,
+alpha-blended, one call each); 4. translucent meshes, sorted far to near by centre, alpha-blended with
+depth writes off, each drawn back faces first then front faces. Anti-aliasing is MSAA when the context
+offers it, else 2x supersampling downscaled on read-back. Picking renders the same opaque and
+translucent batches with integer-output programs into an R32I buffer (nearest surface wins, cut-out
+texels discarded), on demand; billboards are not in it (not pickable). Textures (billboards' and
+meshes') live in a ``textures.TextureCache``: uploaded once per image, kept across uploads.
 """
 
 from __future__ import annotations
@@ -17,10 +19,12 @@ import moderngl
 import numpy as np
 
 from arboretum_client.camera import Camera
-from arboretum_client.scene import Billboard, Grid, InstancedMesh, Mesh, PointSet, Polyline, Scene
+from arboretum_client.scene import Billboard, InstancedMesh, Mesh, PointSet, Polyline, Scene
 
 from . import buffers
+from .layers import UILayer, draw_billboards
 from .programs import Programs, set_uniforms
+from .textures import Sampling, TextureCache, bind
 
 SKY = (0.95, 0.97, 1.0)
 GROUND = (0.55, 0.5, 0.45)
@@ -37,13 +41,24 @@ class FrameStats:
     points: int = 0
     segments: int = 0
 
+    def count(self, mode: int, primitives: int) -> None:
+        """Add one draw call of ``primitives`` triangles, points or segments (by moderngl ``mode``)."""
+        self.draw_calls += 1
+        if mode == moderngl.TRIANGLES:
+            self.triangles += primitives
+        elif mode == moderngl.POINTS:
+            self.points += primitives
+        else:
+            self.segments += primitives
+
 
 class Renderer:
     """Owns the programs, framebuffers and the uploaded scene of one GL context."""
 
-    def __init__(self, ctx: moderngl.Context, size: tuple[int, int], antialias: str = "auto") -> None:
+    def __init__(self, ctx: moderngl.Context, size: tuple[int, int], antialias: str = "auto",
+                 anisotropy: float | None = None) -> None:
         """``antialias``: 'auto' (4x MSAA when the context has it, else 2x supersampling), 'msaa',
-        'supersample' or 'none'."""
+        'supersample' or 'none'. ``anisotropy``: of mesh textures, None for ``default_anisotropy``."""
         self.ctx = ctx
         self.size = (int(size[0]), int(size[1]))
         mode = ("msaa" if ctx.max_samples >= 4 else "supersample") if antialias == "auto" else antialias
@@ -59,15 +74,11 @@ class Renderer:
         self.batches: list[buffers.Batch] = []
         self.overlay: list[buffers.Batch] = []
         self.highlight: dict = {}
-        self._ui_tex: moderngl.Texture | None = None
-        self._ui_on = False
-        self._ui_vao = ctx.vertex_array(self.programs.color["ui"], [])
+        self.ui = UILayer(ctx, self.programs.color["ui"])
         self.grid: buffers.Batch | None = None
         self.billboards: list[Billboard] = []
-        self._textures: dict[int, tuple[np.ndarray, moderngl.Texture]] = {}
-        """id(Billboard.image) -> (that image, kept alive so the id stays unique; its texture)."""
-        self.texture_uploads = 0
-        """Billboard textures uploaded since this renderer was made (tests check the cache)."""
+        self.textures = TextureCache(ctx, anisotropy)
+        """Billboard and mesh textures, uploaded once per image and kept across uploads."""
         self._billboard_vao = ctx.vertex_array(self.programs.color["billboard"], [])
         self.stats = FrameStats()
         self._camera: Camera | None = None
@@ -89,26 +100,25 @@ class Renderer:
         """Replace the GPU copy of the scene (buffers are built here, not per frame)."""
         self.clear_scene()
         self.batches = self._build(scene)
-        self.grid = self._grid_batch(scene.grid) if scene.grid else None
+        self.grid = buffers.grid_batch(self.ctx, self.programs, scene.grid) if scene.grid else None
         self.billboards = [it for it in scene.items if isinstance(it, Billboard)]
         self._sync_textures()
         self._pick_valid = False
 
+    @property
+    def texture_uploads(self) -> int:
+        """Textures uploaded since this renderer was made (tests check the cache)."""
+        return self.textures.uploads
+
+    @property
+    def _textures(self) -> dict:
+        """The texture cache's entries (the name the billboard tests know)."""
+        return self.textures.entries
+
     def _sync_textures(self) -> None:
-        """Upload the textures of new billboard images; free those no billboard uses any more."""
-        keep = {id(b.image) for b in self.billboards}
-        for key in [k for k in self._textures if k not in keep]:
-            self._textures.pop(key)[1].release()
-        for b in self.billboards:
-            if id(b.image) in self._textures:
-                continue
-            h, w = b.image.shape[:2]
-            tex = self.ctx.texture((w, h), 4, np.ascontiguousarray(b.image).tobytes())
-            tex.build_mipmaps()
-            tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
-            tex.repeat_x = tex.repeat_y = False
-            self._textures[id(b.image)] = (b.image, tex)
-            self.texture_uploads += 1
+        """Upload the textures of new billboard images; free those no billboard or batch uses."""
+        used = [self.textures.get(b.image) for b in self.billboards]
+        self.textures.keep_only(used + [b.texture for b in self.batches + self.overlay if b.texture])
 
     def upload_overlay(self, scene: Scene) -> None:
         """Replace the overlay: small, often-changing items (hands, strokes, gizmos) drawn with the
@@ -116,6 +126,7 @@ class Renderer:
         for b in self.overlay:
             b.release()
         self.overlay = self._build(scene)
+        self._sync_textures()
 
     def _build(self, scene: Scene) -> list[buffers.Batch]:
         ctx, progs, out = self.ctx, self.programs, []
@@ -128,12 +139,17 @@ class Renderer:
             out.append(buffers.segments_batch(ctx, progs, *buffers.polyline_segments(group), width))
         for it in scene.items:
             if isinstance(it, Mesh) and len(it.faces):
-                out.append(buffers.mesh_batch(ctx, progs, it))
+                out.append(buffers.mesh_batch(ctx, progs, it, self._texture_of(it)))
             elif isinstance(it, InstancedMesh) and len(it.matrices) and len(it.mesh.faces):
-                out.append(buffers.instanced_batch(ctx, progs, it))
+                out.append(buffers.instanced_batch(ctx, progs, it, self._texture_of(it.mesh)))
             elif isinstance(it, PointSet) and len(it.points):
                 out.append(buffers.points_batch(ctx, progs, it))
         return out
+
+    def _texture_of(self, mesh: Mesh) -> moderngl.Texture | None:
+        if mesh.texture is None:
+            return None
+        return self.textures.get(mesh.texture, Sampling(repeat=True, cutoff=mesh.alpha_cutoff, anisotropic=True))
 
     def set_highlight(self, ids: tuple[int | None, int | None], colors: tuple[tuple, tuple]) -> None:
         """Tint the items with pick ids ``ids`` (left hand, right hand; None = nothing) in ``colors``."""
@@ -143,28 +159,7 @@ class Renderer:
     def set_ui_image(self, image: np.ndarray | None) -> None:
         """The 2D UI layer: an (H, W, 4) uint8 RGBA image at the output size drawn over every frame
         (None removes it). Upload only when it changes; drawing it is one call."""
-        if image is None:
-            self._ui_on = False
-            return
-        h, w = image.shape[:2]
-        if self._ui_tex is None or self._ui_tex.size != (w, h):
-            if self._ui_tex is not None:
-                self._ui_tex.release()
-            self._ui_tex = self.ctx.texture((w, h), 4)
-            self._ui_tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
-        self._ui_tex.write(np.ascontiguousarray(image, np.uint8).tobytes())
-        self._ui_on = True
-
-    def _grid_batch(self, g: Grid) -> buffers.Batch:
-        n = int(np.floor(g.half_size / g.spacing))
-        ticks = np.arange(-n, n + 1) * g.spacing
-        cx, cy, e = g.center[0], g.center[1], n * g.spacing
-        starts = np.concatenate([np.c_[cx + ticks, np.full_like(ticks, cy - e)], np.c_[np.full_like(ticks, cx - e), cy + ticks]])
-        ends = np.concatenate([np.c_[cx + ticks, np.full_like(ticks, cy + e)], np.c_[np.full_like(ticks, cx + e), cy + ticks]])
-        z = np.full((len(starts), 1), g.z)
-        colors = np.broadcast_to(np.asarray(g.color, np.float32), (len(starts), 4))
-        return buffers.segments_batch(self.ctx, self.programs, np.c_[starts, z], np.c_[ends, z], colors,
-                                      np.zeros(len(starts), np.int32), 1.0)
+        self.ui.set_image(image)
 
     def clear_scene(self) -> None:
         for b in self.batches + ([self.grid] if self.grid else []):
@@ -184,14 +179,17 @@ class Renderer:
         prog = (self.programs.pick if pick else self.programs.color)[batch.program]
         px = {k: v * scale for k, v in batch.uniforms.items()}
         set_uniforms(prog, **frame, **px)
+        if batch.texture is not None:
+            bind(prog, "u_texture", batch.texture)
+            set_uniforms(prog, u_alpha_cutoff=batch.alpha_cutoff)
+        cull = batch.cull and not batch.translucent  # the translucent pass culls on its own
+        if cull:
+            self.ctx.enable(moderngl.CULL_FACE)
+            self.ctx.cull_face = "back"
         (batch.vao_pick if pick else batch.vao).render(batch.mode, instances=batch.instances)
-        self.stats.draw_calls += 1
-        if batch.mode == moderngl.TRIANGLES:
-            self.stats.triangles += batch.primitives
-        elif batch.mode == moderngl.POINTS:
-            self.stats.points += batch.primitives
-        else:
-            self.stats.segments += batch.primitives
+        if cull:
+            self.ctx.disable(moderngl.CULL_FACE)
+        self.stats.count(batch.mode, batch.primitives)
 
     def render(self, camera: Camera) -> FrameStats:
         """Draw a frame into ``framebuffer``: ``issue`` then ``resolve``."""
@@ -214,45 +212,14 @@ class Renderer:
         ctx.enable(moderngl.DEPTH_TEST | moderngl.PROGRAM_POINT_SIZE)
         for b in ([self.grid] if self.grid else []) + [b for b in self.batches + self.overlay if not b.translucent]:
             self._draw(b, False, frame, s)
-        self._billboard_pass(camera, frame)
+        n = draw_billboards(ctx, self.programs.color["billboard"], self._billboard_vao, self.textures,
+                            self.billboards, camera.eye, frame)
+        self.stats.draw_calls += n
+        self.stats.triangles += 2 * n
         self._translucent_pass(camera, frame)
-        if self._ui_on and self._ui_tex is not None:
-            self._draw_ui()
+        self.stats.draw_calls += self.ui.draw()
         self._camera, self._pick_valid = camera, False
         return self.stats
-
-    def _draw_ui(self) -> None:
-        ctx = self.ctx
-        ctx.disable(moderngl.DEPTH_TEST)
-        ctx.enable(moderngl.BLEND)
-        ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
-        assert self._ui_tex is not None
-        self._ui_tex.use(0)
-        sampler = self.programs.color["ui"]["u_ui"]
-        assert isinstance(sampler, moderngl.Uniform)
-        sampler.value = 0
-        self._ui_vao.render(moderngl.TRIANGLES, vertices=3)
-        self.stats.draw_calls += 1
-        ctx.disable(moderngl.BLEND)
-
-    def _billboard_pass(self, camera: Camera, frame: dict) -> None:
-        """Each billboard, far to near: one textured strip, alpha-blended, depth-tested and written."""
-        if not self.billboards:
-            return
-        ctx, eye, prog = self.ctx, np.asarray(camera.eye, np.float64), self.programs.color["billboard"]
-        ctx.enable(moderngl.BLEND)
-        ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
-        for b in sorted(self.billboards, key=lambda b: -np.linalg.norm(b.center - eye)):
-            right, up = b.axes(eye)
-            set_uniforms(prog, **frame, u_center=b.center, u_right=right, u_up=up)
-            self._textures[id(b.image)][1].use(0)
-            sampler = prog["u_image"]
-            assert isinstance(sampler, moderngl.Uniform)
-            sampler.value = 0
-            self._billboard_vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
-            self.stats.draw_calls += 1
-            self.stats.triangles += 2
-        ctx.disable(moderngl.BLEND)
 
     def resolve(self) -> None:
         """Resolve the multisampled image into ``framebuffer`` (waits for the frame's rendering)."""
@@ -268,7 +235,7 @@ class Renderer:
         ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
         self._fbo.depth_mask = False
         for b in glass:
-            for side in ("front", "back"):  # cull front = draw the far (back) faces first
+            for side in ("front", "back")[b.cull:]:  # cull front = draw the far (back) faces first
                 ctx.cull_face = side
                 self._draw(b, False, frame, self.scale)
         self._fbo.depth_mask = True
@@ -330,14 +297,12 @@ class Renderer:
         deleted framebuffer later would be a GL error)."""
         self.clear_scene()
         self.billboards = []
-        self._sync_textures()
+        self.textures.release()
         self._billboard_vao.release()
         for b in self.overlay:
             b.release()
         self.overlay = []
-        if self._ui_tex is not None:
-            self._ui_tex.release()
-        self._ui_vao.release()
+        self.ui.release()
         (self.ctx.screen or self.ctx.detect_framebuffer(0)).use()
         fbos = {self._fbo, self._id_fbo, self.framebuffer}
         for fbo in fbos:

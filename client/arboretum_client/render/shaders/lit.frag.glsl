@@ -2,6 +2,7 @@
 // Headlight (diffuse + a little specular) over a hemisphere ambient; two-sided.
 //#include pick_out.glsl
 //#include highlight.glsl
+//#include texel.glsl
 uniform vec3 u_eye;
 uniform vec3 u_sky;
 uniform vec3 u_ground;
@@ -10,6 +11,7 @@ in vec3 v_normal;
 in vec4 v_color;
 flat in int v_id;
 void main() {
+    vec4 color = base_color(v_color);
 #ifdef PICK
     f_id = v_id;
 #else
@@ -19,7 +21,7 @@ void main() {
     vec3 ambient = mix(u_ground, u_sky, 0.5 + 0.5 * n.z);
     float diffuse = max(dot(n, v), 0.0);
     float specular = 0.12 * pow(diffuse, 40.0);
-    vec4 base = highlight(v_id, v_color, 0.7, 0.55);
+    vec4 base = highlight(v_id, color, 0.7, 0.55);
     vec3 rgb = base.rgb * (0.45 * ambient + 0.62 * diffuse) + specular;
     f_color = vec4(min(rgb, vec3(1.0)), base.a);
 #endif
