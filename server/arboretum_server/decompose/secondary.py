@@ -118,8 +118,8 @@ def _segment_samples(a: np.ndarray, b: np.ndarray, step: float) -> tuple[np.ndar
 def bent_fallback(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, waypoints: int = 32,
                   tries: int = 96, batch: int = 8, step: float = 0.005) -> tuple[np.ndarray, int, int] | None:
     """A two-piece secondary branch for lobe ``j``: main-branch vertex -> one of the lobe's own points ->
-    lobe centre, both pieces clear of foreign lobes. The ``tries`` main vertices nearest the centre are
-    tested ``batch`` at a time, nearest first; the first batch with a clear route gives the shortest one.
+    lobe centre, both pieces clear of foreign lobes. The ``tries`` main vertices nearest the centre that
+    lie outside every foreign lobe are tested ``batch`` at a time, nearest first; the first batch with a clear route gives the shortest one.
     None if none has one. For lobes that no straight segment reaches (lobes around a pine's trunk)."""
     centre, box = lobes[j].centre, boxes(lobes)
     members = pts[lobes[j].members]
@@ -130,7 +130,8 @@ def bent_fallback(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndar
         return None
     owner = np.concatenate([np.stack([np.full(len(s), b), np.arange(len(s))], 1) for b, s in enumerate(mains.segments)])
     verts = np.concatenate(mains.segments)
-    order = np.argsort(np.linalg.norm(verts - centre, axis=1))[:tries]
+    order = np.argsort(np.linalg.norm(verts - centre, axis=1))
+    order = order[~inside_foreign(lobes, j, verts[order], box)][:tries]  # a start in a foreign lobe fails
     for start in range(0, len(order), batch):
         v = np.repeat(order[start : start + batch], len(w))  # every (vertex, waypoint) pair of the batch
         ww = np.tile(w, (len(v) // len(w), 1))
