@@ -116,7 +116,7 @@ def _segment_samples(a: np.ndarray, b: np.ndarray, step: float) -> tuple[np.ndar
 
 
 def bent_fallback(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, waypoints: int = 32,
-                  tries: int = 96, batch: int = 8, step: float = 0.005) -> tuple[np.ndarray, int, int] | None:
+                  tries: int = 48, batch: int = 2, step: float = 0.005) -> tuple[np.ndarray, int, int] | None:
     """A two-piece secondary branch for lobe ``j``: main-branch vertex -> one of the lobe's own points ->
     lobe centre, both pieces clear of foreign lobes. The ``tries`` main vertices nearest the centre that
     lie outside every foreign lobe are tested ``batch`` at a time, nearest first; the first batch with a clear route gives the shortest one.
