@@ -108,7 +108,8 @@ def _search(args: argparse.Namespace) -> tuple[dict, str]:
         raise InputError(f"--limit must be at least 1, got {args.limit}")
     with _open(args.library) as lib:
         hits = lib.search(args.words, args.limit, species=args.species)
-        rows = [{**_row(lib.entry(h.id)), "score": round(h.score, 4), "matched": list(h.matched)}
+        entries = {e.id: e for e in lib.entries(species=args.species)}  # one pass, not one per hit
+        rows = [{**_row(entries[h.id]), "score": round(h.score, 4), "matched": list(h.matched)}
                 for h in hits]
     for r in rows:
         r["why"] = f"score {r['score']:.2f}: {' '.join(r['matched']) or 'all'}"

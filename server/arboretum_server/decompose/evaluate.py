@@ -91,15 +91,13 @@ def lobe_distance(hbl: HBL, q: np.ndarray, skip: Callable[[int], bool] = lambda 
     return best
 
 
-def main_fit(hbl: HBL, true_branches: list[np.ndarray]) -> tuple[float, float]:
-    """(mean, worst-branch mean) distance from ``true_branches`` to the MAIN branches / tree height."""
-    h = max(hbl.height, 1e-12)
-    mains = [hbl.branches[i].points for i in hbl.by_level(Level.MAIN)]
-    tree = cKDTree(sample_polylines(mains, h / 500))
-    per = [tree.query(resample_step(b, h / 500))[0] for b in true_branches]
-    if not per:
+def main_fit(per: list[tuple[np.ndarray, np.ndarray]], longest: np.ndarray, height: float) -> tuple[float, float]:
+    """(mean, worst-branch mean) distance / ``height`` of the true branches ``longest`` (indices into
+    ``branch_distances``' output ``per``) to the MAIN branches, seen or not."""
+    d = [per[i][0] for i in longest]
+    if not d:
         return 0.0, 0.0
-    return float(np.concatenate(per).mean() / h), float(max(p.mean() for p in per) / h)
+    return float(np.concatenate(d).mean() / height), float(max(x.mean() for x in d) / height)
 
 
 def turning_angles(polyline: np.ndarray) -> np.ndarray:
@@ -183,10 +181,11 @@ def evaluate(hbl: HBL, truth: TreeTruth, leaf_points: np.ndarray, to_frame: Call
     polys = branch_polylines(truth)
     lengths = np.array([polyline_length(truth, p) for p in polys])
     branches = [to_frame(truth.positions[p]) for p in polys]
-    fit, worst = main_fit(hbl, [branches[i] for i in np.argsort(-lengths)[:n_main]])
     scan = to_frame(np.asarray(scan_points, np.float64).reshape(-1, 3)) if scan_points is not None else None
     per = branch_distances(hbl, branches, scan if scan is not None else np.concatenate(branches))
-    seen = main_fit_seen(per, lengths, n_main, max(hbl.height, 1e-12))
+    h = max(hbl.height, 1e-12)
+    fit, worst = main_fit(per, np.argsort(-lengths)[:n_main], h)
+    seen = main_fit_seen(per, lengths, n_main, h)
     tol = COVER_TOL * hbl.height / 0.8
     leaves = to_frame(np.asarray(leaf_points, dtype=np.float64).reshape(-1, 3))
     cover = float((lobe_distance(hbl, leaves) <= tol).mean()) if len(leaves) else 1.0

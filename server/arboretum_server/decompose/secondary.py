@@ -85,13 +85,18 @@ def foreign(lobes: list[LobeState], j: int, seg: np.ndarray, tol: float,
     return bool(inside_foreign(lobes, j, resample_step(seg, tol), box).any())
 
 
+def _main_vertices(mains: BranchSet) -> tuple[np.ndarray, np.ndarray]:
+    """Every main-branch vertex (V, 3) and its (segment, vertex index) (V, 2)."""
+    owner = np.concatenate([np.stack([np.full(len(s), b), np.arange(len(s))], 1) for b, s in enumerate(mains.segments)])
+    return np.concatenate(mains.segments), owner
+
+
 def straight_fallback(lobes: list[LobeState], j: int, mains: BranchSet, tries: int = 64,
                       step: float = 0.005, batch: int = 8) -> tuple[np.ndarray, int, int] | None:
     """A straight secondary branch for lobe ``j`` from the nearest main-branch vertex whose segment to the
     lobe centre stays out of foreign lobes (candidates tested ``batch`` at a time, nearest first), or None."""
     centre = lobes[j].centre
-    owner = np.concatenate([np.stack([np.full(len(s), b), np.arange(len(s))], 1) for b, s in enumerate(mains.segments)])
-    verts = np.concatenate(mains.segments)
+    verts, owner = _main_vertices(mains)
     dist = np.linalg.norm(verts - centre, axis=1)
     order = np.array([i for i in np.argsort(dist)[:tries] if dist[i] > 1e-9], dtype=int)
     box = boxes(lobes)
@@ -119,8 +124,8 @@ def bent_fallback(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndar
                   tries: int = 48, batch: int = 2, step: float = 0.005) -> tuple[np.ndarray, int, int] | None:
     """A two-piece secondary branch for lobe ``j``: main-branch vertex -> one of the lobe's own points ->
     lobe centre, both pieces clear of foreign lobes. The ``tries`` main vertices nearest the centre that
-    lie outside every foreign lobe are tested ``batch`` at a time, nearest first; the first batch with a clear route gives the shortest one.
-    None if none has one. For lobes that no straight segment reaches (lobes around a pine's trunk)."""
+    lie outside every foreign lobe are tested ``batch`` at a time, nearest first; the first batch with a
+    clear route gives the shortest one. None if none has one. For lobes that no straight segment reaches (lobes around a pine's trunk)."""
     centre, box = lobes[j].centre, boxes(lobes)
     members = pts[lobes[j].members]
     w = members[:: max(1, len(members) // waypoints)]
@@ -128,8 +133,7 @@ def bent_fallback(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndar
     w = w[np.bincount(which, weights=inside_foreign(lobes, j, q, box), minlength=len(w)) == 0]
     if not len(w):
         return None
-    owner = np.concatenate([np.stack([np.full(len(s), b), np.arange(len(s))], 1) for b, s in enumerate(mains.segments)])
-    verts = np.concatenate(mains.segments)
+    verts, owner = _main_vertices(mains)
     order = np.argsort(np.linalg.norm(verts - centre, axis=1))
     order = order[~inside_foreign(lobes, j, verts[order], box)][:tries]  # a start in a foreign lobe fails
     for start in range(0, len(order), batch):
