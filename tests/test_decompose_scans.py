@@ -33,7 +33,8 @@ def test_coffeetree_main_branches_follow_the_qsm(scans_dir):
     f = real_figures(_scan(scans_dir, "01_"))
     assert f["foliage_source"] == "crown"  # leaf-off: nearly all wood
     assert f["leaf_points"] / f["points"] < 0.1
-    assert f["qsm_order01_ref_to_main"] <= 0.014  # trunk and first-order branches: 0.0119 (0.0101 unsmoothed)
+    # trunk and first-order branches: 0.0134 (0.0119 with reach-only main selection, 0.0101 unsmoothed)
+    assert f["qsm_order01_ref_to_main"] <= 0.015
     assert f["qsm_main_to_ref"] <= 0.01  # no invented main branches
 
 
@@ -44,8 +45,9 @@ def test_leaf_on_scan_lobes_cover_the_crown(scans_dir):
     assert f["main_turning"] < 0.15 and f["secondary_turning"] < 0.2  # unsmoothed: 0.47 and 0.84
     # the bare trunk is wood: no lobe along it (12 of 40 lobe centres sat below 0.6 of the height before)
     assert f["crown_base"] > 0.8 and f["lobes_below_crown_base"] <= 8
-    # secondaries straightened to keep out of foreign lobes follow less of the wood: 0.79 measured
-    assert f["qsm_ref_covered_all"] >= 0.75
+    # secondaries straightened to keep out of foreign lobes follow less of the wood: 0.79 measured then,
+    # 0.91 now
+    assert f["qsm_ref_covered_all"] >= 0.85
 
 
 @pytest.mark.parametrize("species", sorted(SPECIES_COUNTS))
@@ -58,7 +60,7 @@ def test_harmonic_species_hold_the_floor(species, case):
     # dense pine whorls and missing data are the hard cases; the rest holds 3 % of height
     assert f["main_fit"] <= (0.06 if species == "pine" or case == "sector" else 0.03)
     # the 2 % over what the scan shows, equally long branches interchangeable (evaluate.py)
-    assert f["main_fit_seen"] <= (0.045 if species == "pine" else 0.02)
+    assert f["main_fit_seen"] <= (0.03 if species == "pine" else 0.02)  # pine 0.0246 (0.041 before spread)
     assert f["main_precision"] <= 0.01  # the main branches found lie on real wood
 
 
@@ -78,9 +80,10 @@ def test_virtual_scanner_harmonic_species(species, case):
     f = synth_figures(species, 1, case, scanner=True)
     assert f["counts_ok"] and f["connected"]
     assert f["leaf_cover"] >= 0.95
-    assert f["crossings"] <= (4 if species == "pine" else 0)
+    assert f["crossings"] <= (2 if species == "pine" else 0)
     assert f["main_fit"] <= (0.06 if species == "pine" or case == "sector" else 0.03)
-    assert f["main_fit_seen"] <= (0.06 if species == "pine" else 0.025 if case == "sector" else 0.02)
+    # pine 0.0283 (0.058 before the spread term in main selection)
+    assert f["main_fit_seen"] <= (0.035 if species == "pine" else 0.025 if case == "sector" else 0.02)
     assert f["main_precision"] <= 0.01
 
 

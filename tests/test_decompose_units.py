@@ -123,6 +123,28 @@ def test_select_mains_prefers_far_reaching_paths():
     assert order == [1, 2]
 
 
+def _path(*corners):
+    return resample_step(np.array(corners, dtype=float), 0.01)
+
+
+def test_select_mains_does_not_reward_paths_climbing_beside_a_kept_branch():
+    # A path climbing 2.5 cm beside the trunk (just outside the 2 cm merge threshold, as through foliage
+    # or up the far side of a half-seen trunk) reaches 0.5 m of new arc but adds no new wood; the lateral
+    # branch reaches 0.3 m. Arc length alone picked the climber.
+    trunk = _path([0, 0, 0], [0, 0, 0.8])
+    climber = _path([0, 0, 0], [0, 0, 0.1], [0.025, 0, 0.12], [0.025, 0, 0.62])
+    lateral = _path([0, 0, 0], [0, 0, 0.2], [0.3, 0, 0.2])
+    assert select_mains([climber, trunk, lateral], 2, 0.02, 0.01) == [1, 2]
+
+
+def test_select_mains_prefers_a_long_upright_branch_to_a_short_lateral_one():
+    # Spread alone (the farthest distance from the kept branches) would pick the short lateral branch.
+    trunk = _path([0, 0, 0], [0, 0, 0.8])
+    upright = _path([0, 0, 0], [0, 0, 0.2], [0.15, 0, 0.75])
+    lateral = _path([0, 0, 0], [0, 0, 0.3], [0.0, 0.2, 0.3])
+    assert select_mains([lateral, trunk, upright], 2, 0.02, 0.01) == [1, 2]
+
+
 def _closed_and_outward(v, f):
     edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
     _, counts = np.unique(edges, axis=0, return_counts=True)

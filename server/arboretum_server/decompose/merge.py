@@ -137,14 +137,23 @@ def add_branch(kept: BranchSet, segment: np.ndarray, parent: int, pv: int) -> No
 
 
 def select_mains(paths: list[np.ndarray], n_main: int, tau: float, step: float) -> list[int]:
-    """Indices of ``n_main`` paths: the longest, then each time the one reaching farthest beyond the kept ones.
+    """Indices of ``n_main`` paths: the longest, then each time the one scoring highest beyond the kept ones.
 
-    "Farthest" is the arc length beyond the last merged vertex, capped at ``WANDER`` times the straight
-    distance from there to the tip, so paths that wander through foliage are not rewarded.
+    The score is the geometric mean of two readings of "new wood" (ours; measured in
+    docs/decomposition.md):
+
+    - *reach*: the arc length beyond the last merged vertex, capped at ``WANDER`` times the straight
+      distance from there to the tip, so paths that wander through foliage are not rewarded;
+    - *spread*: the largest distance of any of the path's vertices from the kept paths.
+
+    Reach alone rewards paths that climb beside a kept branch just outside the merge threshold (through
+    foliage, or up the far side of a trunk the scan saw only in part) or hop between a conifer's crowded
+    whorls; spread alone prefers short lateral branches to long upright ones.
     """
     lens = np.array([len(p) for p in paths])
     tips = np.array([p[-1] for p in paths])
     chosen = [int(np.argmax(lens))]
+    verts, starts = np.concatenate(paths), np.r_[0, np.cumsum(lens)[:-1]]
 
     def reach(ref: int) -> np.ndarray:
         k = np.maximum(merged_prefix(paths, paths[ref], tau), 1)
@@ -153,13 +162,17 @@ def select_mains(paths: list[np.ndarray], n_main: int, tau: float, step: float) 
         return np.minimum((lens - k) * step, WANDER * straight)
 
     novelty = reach(chosen[0])
+    gap = cKDTree(paths[chosen[0]]).query(verts)[0]
     while len(chosen) < n_main:
-        novelty[chosen] = -1
-        best = int(np.argmax(novelty))
+        spread = np.maximum.reduceat(gap, starts)
+        score = np.sqrt(np.maximum(novelty, 0.0) * spread)
+        score[chosen] = -1
+        best = int(np.argmax(score))
         if novelty[best] < 2 * step:
             break
         chosen.append(best)
         novelty = np.minimum(novelty, reach(best))
+        gap = np.minimum(gap, cKDTree(paths[best]).query(verts)[0])
     return chosen
 
 
