@@ -9,6 +9,7 @@ from arboretum_server.decompose.graph import knn_graph, path_to, shortest_paths
 from arboretum_server.decompose.lobes import (
     alpha_shape,
     convex_hull,
+    is_closed_manifold,
     kmeans,
     lobe_hull,
     winding_numbers,
@@ -165,7 +166,6 @@ def test_alpha_shape_is_closed_outward_and_holds_its_points(rng):
 
 def test_pinched_clusters_still_give_a_closed_manifold_hull(rng):
     """Two blobs joined by a thin neck make tetrahedra meet along single edges at the probe radius."""
-    from arboretum_server.decompose.lobes import is_closed_manifold
 
     a = rng.normal(0, 0.012, (200, 3))
     b = rng.normal(0, 0.012, (200, 3)) + [0.09, 0, 0]
@@ -178,7 +178,6 @@ def test_pinched_clusters_still_give_a_closed_manifold_hull(rng):
 
 
 def test_manifold_check_rejects_pinched_and_split_meshes():
-    from arboretum_server.decompose.lobes import is_closed_manifold
 
     tet = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
     assert is_closed_manifold(tet)
@@ -266,6 +265,50 @@ def test_bent_fallback_goes_round_a_wall_that_blocks_every_straight_branch():
     assert parent == 0 and np.allclose(seg[0], mains.segments[0][pv]) and np.allclose(seg[-1], own.centre)
     assert not inside_foreign(lobes, 1, resample_step(seg, 0.005)).any()
     assert seg[:, 2].max() > 1.2  # it went over the wall
+
+
+def _ring(rng, n=600, height=0.3):
+    """Foliage in a shell 2-5 cm around the z axis (a lobe wrapped round a trunk, 0.8 m frame)."""
+    r, a = rng.uniform(0.02, 0.05, n), rng.uniform(0, 2 * np.pi, n)
+    return np.c_[r * np.cos(a), r * np.sin(a), rng.uniform(0, height, n)]
+
+
+def test_carved_alpha_shape_reaches_the_wood_but_not_across_it(rng):
+    from arboretum_server.decompose.lobes import carved_hull
+
+    ring = _ring(rng)
+    axis = np.c_[np.zeros(61), np.zeros(61), np.linspace(0, 0.3, 61)]
+    v, f, used_alpha = lobe_hull(ring, 1 / 13)
+    assert used_alpha and (winding_numbers(v, f, axis[5:-5]) > 0.5).mean() > 0.9  # the plain shape fills the trunk
+    cv, cf = carved_hull(ring, 1 / 13, axis)
+    assert is_closed_manifold(cf)
+    assert (winding_numbers(cv, cf, axis) < 0.5).all()  # the carved one leaves it out
+    mid = _ring(rng, 200)
+    mid[:, :2] *= 0.035 / np.linalg.norm(mid[:, :2], axis=1, keepdims=True)
+    mid[:, 2] = rng.uniform(0.03, 0.27, 200)
+    assert (winding_numbers(cv, cf, mid) > 0.5).mean() > 0.9  # and still holds the foliage shell
+
+
+def test_unwrap_carves_the_trunk_out_of_a_lobe_wrapped_round_it(rng):
+    from arboretum_server.decompose.merge import BranchSet, add_branch, resample_step
+    from arboretum_server.decompose.secondary import unwrap
+    from arboretum_server.decompose.state import LobeState
+
+    ring = _ring(rng)
+    pts = np.vstack([ring, [[0.15, 0.0, 0.15]]])
+    v, f, _ = lobe_hull(ring, 1 / 13)
+    wrapped = LobeState(np.arange(len(ring)), ring.mean(axis=0), v, f, True, np.zeros((2, 3)), 0, 0)
+    beside = _box_lobe((0.13, -0.02, 0.13), (0.17, 0.02, 0.17), np.array([len(ring)]), pts)
+    mains = BranchSet()
+    add_branch(mains, np.c_[np.zeros(31), np.zeros(31), np.linspace(0.0, 0.3, 31)], -1, -1)
+    trunk = resample_step(mains.segments[0], 0.005)
+    lobes = [wrapped, beside]
+    assert unwrap(lobes, 1, mains, pts, 1 / 13, first=1) == 0 and lobes[0] is wrapped  # kept lobes untouched
+    assert unwrap(lobes, 1, mains, pts, 1 / 13) == 1
+    carved = lobes[0]
+    assert (winding_numbers(carved.hull_vertices, carved.hull_faces, trunk) < 0.5).all()
+    assert is_closed_manifold(carved.hull_faces) and carved.alpha and lobes[1] is beside
+    assert np.array_equal(carved.members, wrapped.members) and carved.segment is wrapped.segment
 
 
 def test_main_fit_seen_treats_tied_lengths_as_interchangeable_and_skips_unseen_wood():

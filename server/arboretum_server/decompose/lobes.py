@@ -50,35 +50,75 @@ def _circumradii(p: np.ndarray) -> np.ndarray:
     return r
 
 
-def alpha_shape(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray] | None:
-    """Closed alpha shape (vertices (V, 3), outward faces (F, 3) int32) of ``points``, or None."""
+PINCH_ROUNDS = 8
+"""Rounds of dropping the tetrahedra at pinched edges of a carved alpha shape (``alpha_shape``)."""
+
+
+def alpha_shape(points: np.ndarray, radius: float, blockers: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+    """Closed alpha shape (vertices (V, 3), outward faces (F, 3) int32) of ``points``, or None.
+
+    ``blockers`` (B, 3) join the Delaunay tetrahedralisation and every tetrahedron touching one is
+    dropped: the shape then reaches from its points up to, but not across, the blockers. The tunnel
+    this cuts often pinches the boundary (two tetrahedra meeting only along an edge); the tetrahedra at
+    pinched edges are dropped too, for up to ``PINCH_ROUNDS`` rounds.
+    """
     if len(points) < 5:
         return None
+    n_own = len(points)
+    carve = blockers is not None and len(blockers) > 0
+    if carve:
+        points = np.vstack([points, blockers])
     try:
         dt = Delaunay(points)
     except QhullError:
         return None
     tets = dt.simplices
-    keep = _circumradii(points[tets]) < radius
-    if not keep.any():
-        return None
+    keep = (_circumradii(points[tets]) < radius) & (tets < n_own).all(axis=1)
     tets = tets[keep]
-    if len(np.unique(tets)) < MIN_COVER * len(points):
+    faces, opp = _boundary(tets, len(points))
+    for _ in range(PINCH_ROUNDS if carve else 0):
+        pinched = _pinched_edges(faces)
+        if not len(pinched) or not len(tets):
+            break
+        tets = tets[~_has_edge(tets, pinched)]
+        faces, opp = _boundary(tets, len(points))
+    if not len(tets) or len(np.unique(tets)) < MIN_COVER * n_own:
         return None
-    # faces opposite each vertex, oriented away from that vertex
-    faces = np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 3, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 1]]])
-    opp = np.concatenate([tets[:, 0], tets[:, 1], tets[:, 2], tets[:, 3]])
-    srt = np.sort(faces, axis=1).astype(np.int64)
-    n = np.int64(len(points))
-    key = (srt[:, 0] * n + srt[:, 1]) * n + srt[:, 2]
-    _, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
-    bnd = cnt[inv] == 1
-    faces, opp = faces[bnd], opp[bnd]
     f = points[faces]
     n = np.cross(f[:, 1] - f[:, 0], f[:, 2] - f[:, 0])
     flip = ((points[opp] - f[:, 0]) * n).sum(axis=1) > 0
     faces[flip] = faces[flip][:, [0, 2, 1]]
     return _compact(points, faces)
+
+
+def _boundary(tets: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray]:
+    """Faces (F, 3) that belong to exactly one of ``tets`` (T, 4), and the vertex opposite each (F,)."""
+    faces = np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 3, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 1]]])
+    opp = np.concatenate([tets[:, 0], tets[:, 1], tets[:, 2], tets[:, 3]])
+    srt = np.sort(faces, axis=1).astype(np.int64)
+    n = np.int64(n_points)
+    key = (srt[:, 0] * n + srt[:, 1]) * n + srt[:, 2]
+    _, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
+    bnd = cnt[inv] == 1
+    return faces[bnd], opp[bnd]
+
+
+def _edge_keys(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    lo, hi = np.minimum(a, b).astype(np.int64), np.maximum(a, b).astype(np.int64)
+    return lo * (1 << 32) + hi
+
+
+def _pinched_edges(faces: np.ndarray) -> np.ndarray:
+    """Keys of the edges that border more than two of ``faces`` (F, 3)."""
+    keys = np.concatenate([_edge_keys(faces[:, i], faces[:, (i + 1) % 3]) for i in range(3)])
+    u, cnt = np.unique(keys, return_counts=True)
+    return u[cnt > 2]
+
+
+def _has_edge(tets: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """(T,) bool: tetrahedra (T, 4) holding one of the ``edges`` (keys from ``_edge_keys``)."""
+    pairs = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+    return np.any([np.isin(_edge_keys(tets[:, i], tets[:, j]), edges) for i, j in pairs], axis=0)
 
 
 def _compact(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -135,12 +175,21 @@ def lobe_hull(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray
     edge leave it with four faces) or fall apart into islands; growing the probe radius through
     ``RADIUS_STEPS`` usually fills such gaps before the convex hull is needed.
     """
-    for step in RADIUS_STEPS:
-        shape = alpha_shape(points, radius * step)
-        if shape is not None and is_closed_manifold(shape[1]):
-            return shape[0], shape[1], True
+    shape = carved_hull(points, radius, None)
+    if shape is not None:
+        return shape[0], shape[1], True
     v, f = convex_hull(points)
     return v, f, False
+
+
+def carved_hull(points: np.ndarray, radius: float, blockers: np.ndarray | None) -> tuple[np.ndarray, np.ndarray] | None:
+    """The first closed, one-piece alpha shape of ``points`` over ``RADIUS_STEPS`` that does not span
+    ``blockers`` (see ``alpha_shape``), or None."""
+    for step in RADIUS_STEPS:
+        shape = alpha_shape(points, radius * step, blockers)
+        if shape is not None and is_closed_manifold(shape[1]):
+            return shape
+    return None
 
 
 def winding_numbers(vertices: np.ndarray, faces: np.ndarray, q: np.ndarray) -> np.ndarray:

@@ -8,7 +8,10 @@ inside a foreign lobe's hull is routed again on a graph where foreign zones cost
 more (one extra Dijkstra per offender). If even that path crosses (the only wood to the lobe runs
 through another lobe), the secondary branch becomes a straight segment from the nearest main-branch
 vertex whose segment to the lobe centre stays clear (a deviation from the paper, which has no such
-guarantee); if none does, the crossing path is kept.
+guarantee), else a two-piece one through one of the lobe's own points. If none clears because the main
+branches there run inside foreign lobes (an alpha shape fills the gap where a main branch passes through
+its foliage: the pine's lobes wrap its trunk), those lobes are rebuilt with the main branches carved out
+(``unwrap``) and both repairs are tried again; if still none clears, the crossing path is kept.
 
 Every secondary branch is smoothed (smooth.py, ours) with its connection point on the main branch and its
 tip at the lobe centre fixed; where the smoothed curve would enter a foreign lobe and the unsmoothed
@@ -25,7 +28,7 @@ from scipy.spatial import cKDTree
 
 from .graph import path_to, shortest_paths, weighted
 from .grid import BoxGrid
-from .lobes import lobe_hull, winding_numbers
+from .lobes import carved_hull, lobe_hull, winding_numbers
 from .merge import BranchSet, centre_paths, merge_secondaries, resample_step
 from .options import DecomposeOptions
 from .smooth import smooth_polylines, vertex_limits
@@ -151,6 +154,36 @@ def bent_fallback(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndar
     return None
 
 
+def unwrap(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, radius: float, first: int = 0,
+           near: int = 48, step: float = 0.005) -> int:
+    """Carve the main branches out of the foreign lobes that enclose the ``near`` main-branch points nearest
+    lobe ``j``'s centre; returns how many lobes changed (``lobes`` is updated in place).
+
+    A lobe's alpha shape (probe radius 7.7 cm at the 0.8 m scale) fills the gap where a main branch runs
+    through its foliage, so a secondary branch leaving that main branch starts inside a lobe it does not
+    feed (the pine's lobes wrap its trunk). Each such lobe with index >= ``first`` is rebuilt with the main
+    branches inside it (resampled every ``step``) as blockers (``lobes.alpha_shape``): it then reaches up
+    to the wood but not across it. A lobe whose carved shape is not a closed one-piece surface is kept.
+    """
+    verts = np.concatenate([resample_step(seg, step) for seg in mains.segments])
+    near_pts = verts[np.argsort(np.linalg.norm(verts - lobes[j].centre, axis=1))[:near]]
+    changed = 0
+    for k in range(first, len(lobes)):
+        lb = lobes[k]
+        if k == j:
+            continue
+        lo, hi = lb.hull_vertices.min(axis=0), lb.hull_vertices.max(axis=0)
+        c = near_pts[((near_pts > lo) & (near_pts < hi)).all(axis=1)]
+        if not len(c) or not (winding_numbers(lb.hull_vertices, lb.hull_faces, c) > 0.5).any():
+            continue
+        inbox = verts[((verts > lo) & (verts < hi)).all(axis=1)]
+        shape = carved_hull(pts[lb.members], radius, inbox[winding_numbers(lb.hull_vertices, lb.hull_faces, inbox) > 0.5])
+        if shape is not None:
+            lobes[k] = replace(lb, hull_vertices=shape[0], hull_faces=shape[1], alpha=True)
+            changed += 1
+    return changed
+
+
 def clear_smooth(lobes: list[LobeState], j: int, raw: np.ndarray, smooth: np.ndarray, tol: float,
                  box: tuple[np.ndarray, np.ndarray], tree: cKDTree) -> np.ndarray | None:
     """Lobe ``j``'s secondary branch kept out of foreign lobes: ``smooth`` if it stays clear, else ``raw``
@@ -203,7 +236,10 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
         smoothed = smooth_polylines([seg], vertex_limits([seg], tree))[0]
         seg = clear_smooth(lobes, j, seg, smoothed, o.step / 2, box, tree)
         if seg is None:
-            seg, parent, pv = (straight_fallback(lobes, j, mains) or bent_fallback(lobes, j, mains, pts)
-                               or (smoothed, parent, pv))
+            fallback = straight_fallback(lobes, j, mains) or bent_fallback(lobes, j, mains, pts)
+            if fallback is None and unwrap(lobes, j, mains, pts, o.alpha_radius, first=len(others)):
+                box = boxes(lobes)
+                fallback = straight_fallback(lobes, j, mains) or bent_fallback(lobes, j, mains, pts)
+            seg, parent, pv = fallback or (smoothed, parent, pv)
         lobes[j] = LobeState(lb.members, lb.centre, lb.hull_vertices, lb.hull_faces, lb.alpha, seg, parent, pv)
     return lobes[len(others):], pred, rerouted
