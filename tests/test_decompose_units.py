@@ -303,12 +303,43 @@ def test_unwrap_carves_the_trunk_out_of_a_lobe_wrapped_round_it(rng):
     add_branch(mains, np.c_[np.zeros(31), np.zeros(31), np.linspace(0.0, 0.3, 31)], -1, -1)
     trunk = resample_step(mains.segments[0], 0.005)
     lobes = [wrapped, beside]
-    assert unwrap(lobes, 1, mains, pts, 1 / 13, first=1) == 0 and lobes[0] is wrapped  # kept lobes untouched
     assert unwrap(lobes, 1, mains, pts, 1 / 13) == 1
     carved = lobes[0]
     assert (winding_numbers(carved.hull_vertices, carved.hull_faces, trunk) < 0.5).all()
     assert is_closed_manifold(carved.hull_faces) and carved.alpha and lobes[1] is beside
     assert np.array_equal(carved.members, wrapped.members) and carved.segment is wrapped.segment
+
+
+def test_a_new_lobe_beside_a_trunk_wrapped_by_a_kept_lobe_gets_a_clear_branch(rng):
+    # Refinement: the kept lobe's foliage flanks the trunk on both sides (+-y), and its alpha shape fills
+    # the gap, trunk included; the new lobe lies along +x. Every route from the trunk starts inside the
+    # kept lobe until make_lobes carves the trunk out of it.
+    from arboretum_server.decompose.merge import BranchSet, add_branch, resample_step
+    from arboretum_server.decompose.pipeline import centre_grid
+    from arboretum_server.decompose.secondary import inside_foreign, make_lobes, zones
+    from arboretum_server.decompose.state import LobeState
+
+    side = np.where(rng.random(300) < 0.5, -1, 1)
+    flanks = np.c_[rng.uniform(-0.03, 0.03, 300), side * rng.uniform(0.02, 0.05, 300), rng.uniform(0, 0.3, 300)]
+    a = rng.uniform(0, 2 * np.pi, 200)
+    trunk_pts = np.c_[0.005 * np.cos(a), 0.005 * np.sin(a), np.linspace(0, 0.3, 200)]
+    blob = np.array([0.12, 0.0, 0.15]) + rng.normal(0, 0.006, (40, 3))
+    pts = np.vstack([flanks, trunk_pts, blob])
+    kept_idx, new_idx = np.arange(300), np.arange(500, 540)
+    v, f, _ = lobe_hull(pts[kept_idx], 1 / 13)
+    kept = LobeState(kept_idx, pts[kept_idx].mean(axis=0), v, f, True, np.zeros((2, 3)), 0, 0)
+    mains = BranchSet()
+    add_branch(mains, np.c_[np.zeros(31), np.zeros(31), np.linspace(0.0, 0.3, 31)], -1, -1)
+    assert (winding_numbers(v, f, mains.segments[0][3:-3]) > 0.5).all()  # the trunk is inside the kept lobe
+    g = knn_graph(pts, 5, 0.05)
+    zone = zones(pts, [kept_idx, new_idx])
+    lobes, _, _ = make_lobes([new_idx], pts[new_idx].mean(axis=0)[None], pts, g.adjacency, 300, zone, mains,
+                             centre_grid(pts, 0.005), 0.02, DecomposeOptions(), (kept,))
+    assert len(lobes) == 2 and np.array_equal(lobes[0].members, kept_idx)
+    seg = lobes[1].segment
+    assert np.allclose(seg[0], mains.segments[0][lobes[1].parent_vertex]) and np.allclose(seg[-1], lobes[1].centre)
+    assert not inside_foreign(lobes, 1, resample_step(seg, 0.002)).any()  # clear of the carved kept lobe
+    assert (winding_numbers(kept.hull_vertices, kept.hull_faces, resample_step(seg, 0.002)) > 0.5).any()  # not of the old
 
 
 def test_main_fit_seen_treats_tied_lengths_as_interchangeable_and_skips_unseen_wood():

@@ -1,7 +1,9 @@
 """Interactive refinement of a decomposition (VRTree section 3.4, Fig. 5): remove, insert, merge and
 split lobes. Each is a pure function ``Decomposition -> Decomposition`` that redoes only what it must:
 hulls and secondary branches of the lobes it creates (one Dijkstra on the cached graph, Algorithm 1
-step 2 against the cached main branches), then the radii and records. Point indices refer to
+step 2 against the cached main branches; a kept lobe wrapped round the main branch where a new branch
+must start is carved, ``secondary.unwrap``), then the radii and records. A kept lobe that loses points
+gets a plain alpha shape again. Point indices refer to
 ``Decomposition.points``; strokes are in the HBL's output frame.
 """
 
@@ -28,12 +30,11 @@ def _lobe_index(d: Decomposition, j: int) -> int:
 def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], centres: np.ndarray,
             t0: float, op: str) -> Decomposition:
     """Route the new lobes over ``groups`` after ``kept`` and rebuild the records."""
-    new: list[LobeState] = []
-    if groups:
+    lobes = tuple(kept)
+    if groups:  # kept lobes come back first, carved where they wrapped the start of a new branch
         zone = zones(d.points, [lb.members for lb in kept] + groups)
-        new, _, _ = make_lobes(groups, centres, d.points, d.adjacency, d.root_index, zone, d.mains, d.grid,
-                               d.tau, d.options, tuple(kept))
-    lobes = tuple(kept) + tuple(new)
+        lobes = tuple(make_lobes(groups, centres, d.points, d.adjacency, d.root_index, zone, d.mains, d.grid,
+                                 d.tau, d.options, lobes)[0])
     lobe_of = np.full(len(d.points), -1, np.int32)
     for j, lb in enumerate(lobes):
         lobe_of[lb.members] = j

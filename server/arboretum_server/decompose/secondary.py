@@ -154,21 +154,22 @@ def bent_fallback(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndar
     return None
 
 
-def unwrap(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, radius: float, first: int = 0,
+def unwrap(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, radius: float,
            near: int = 48, step: float = 0.005) -> int:
     """Carve the main branches out of the foreign lobes that enclose the ``near`` main-branch points nearest
     lobe ``j``'s centre; returns how many lobes changed (``lobes`` is updated in place).
 
     A lobe's alpha shape (probe radius 7.7 cm at the 0.8 m scale) fills the gap where a main branch runs
     through its foliage, so a secondary branch leaving that main branch starts inside a lobe it does not
-    feed (the pine's lobes wrap its trunk). Each such lobe with index >= ``first`` is rebuilt with the main
-    branches inside it (resampled every ``step``) as blockers (``lobes.alpha_shape``): it then reaches up
-    to the wood but not across it. A lobe whose carved shape is not a closed one-piece surface is kept.
+    feed (the pine's lobes wrap its trunk). Each such lobe is rebuilt with the main branches inside it
+    (resampled every ``step``) as blockers (``lobes.alpha_shape``): it then reaches up to the wood but not
+    across it. Only hulls change (members, centres and branches stay), and they only shrink, so no
+    other branch starts crossing. A lobe whose carved shape is not a closed one-piece surface is kept.
     """
     verts = np.concatenate([resample_step(seg, step) for seg in mains.segments])
     near_pts = verts[np.argsort(np.linalg.norm(verts - lobes[j].centre, axis=1))[:near]]
     changed = 0
-    for k in range(first, len(lobes)):
+    for k in range(len(lobes)):
         lb = lobes[k]
         if k == j:
             continue
@@ -207,7 +208,9 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
     """Lobes over the point-index ``groups`` with hulls and routed, merged secondary branches.
 
     ``others`` are lobes kept from before (zone ids 0..len(others)-1; the new lobes follow them).
-    Returns the new lobes, the routing predecessors (N,) and the number of branches routed again.
+    Returns every lobe (``others`` first, with the main branches carved out of those that wrapped the
+    start of a new lobe's branch, see ``unwrap``; then the new ones), the routing predecessors (N,) and
+    the number of branches routed again.
     """
     _, pred = shortest_paths(weighted(adjacency, np.where(zone >= 0, ZONE_COST, 1.0)), root)
     targets = [int(g[np.argmin(np.linalg.norm(pts[g] - c, axis=1))]) for g, c in zip(groups, centres)]
@@ -237,9 +240,9 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
         seg = clear_smooth(lobes, j, seg, smoothed, o.step / 2, box, tree)
         if seg is None:
             fallback = straight_fallback(lobes, j, mains) or bent_fallback(lobes, j, mains, pts)
-            if fallback is None and unwrap(lobes, j, mains, pts, o.alpha_radius, first=len(others)):
+            if fallback is None and unwrap(lobes, j, mains, pts, o.alpha_radius):
                 box = boxes(lobes)
                 fallback = straight_fallback(lobes, j, mains) or bent_fallback(lobes, j, mains, pts)
             seg, parent, pv = fallback or (smoothed, parent, pv)
         lobes[j] = LobeState(lb.members, lb.centre, lb.hull_vertices, lb.hull_faces, lb.alpha, seg, parent, pv)
-    return lobes[len(others):], pred, rerouted
+    return lobes, pred, rerouted
