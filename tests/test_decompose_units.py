@@ -146,6 +146,15 @@ def test_select_mains_prefers_a_long_upright_branch_to_a_short_lateral_one():
     assert select_mains([lateral, trunk, upright], 2, 0.02, 0.01) == [1, 2]
 
 
+def test_select_mains_skips_a_far_spreading_path_that_adds_no_new_wood():
+    # A path that goes out 30 cm and comes back ends 1 cm from the trunk: its reach (capped at 1.3x the
+    # straight distance to its tip) is under two steps. It spreads farthest but must not stop the search.
+    trunk = _path([0, 0, 0], [0, 0, 1.2])
+    loop = _path([0, 0, 0], [0, 0, 0.3], [0.3, 0, 0.3], [0.008, 0, 0.31])
+    side = _path([0, 0, 0], [0, 0, 0.2], [0, 0.06, 0.2])
+    assert select_mains([trunk, loop, side], 3, 0.02, 0.01) == [0, 2]
+
+
 def _closed_and_outward(v, f):
     edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
     _, counts = np.unique(edges, axis=0, return_counts=True)
@@ -308,6 +317,31 @@ def test_unwrap_carves_the_trunk_out_of_a_lobe_wrapped_round_it(rng):
     assert (winding_numbers(carved.hull_vertices, carved.hull_faces, trunk) < 0.5).all()
     assert is_closed_manifold(carved.hull_faces) and carved.alpha and lobes[1] is beside
     assert np.array_equal(carved.members, wrapped.members) and carved.segment is wrapped.segment
+
+
+@pytest.mark.parametrize("seed", [14, 30, 69])
+def test_unwrap_never_grows_a_lobe(seed):
+    # Clusters round a trunk whose carved shape closes only at a larger probe radius than their plain one
+    # (found by search: 5 of 120 such clusters grew when every radius step was allowed). A grown lobe
+    # could swallow a branch already checked clear of it.
+    from arboretum_server.decompose.merge import BranchSet, add_branch
+    from arboretum_server.decompose.secondary import unwrap
+    from arboretum_server.decompose.state import LobeState
+
+    rng = np.random.default_rng(seed)
+    n, c = int(rng.integers(40, 250)), np.r_[rng.uniform(-0.04, 0.04, 2), 0.2]
+    cloud = c + rng.normal(0, [0.03, 0.03, 0.05], (n, 3))
+    pts = np.vstack([cloud, [[0.15, 0.0, 0.2]]])
+    v, f, used_alpha = lobe_hull(cloud, 1 / 13)
+    assert used_alpha
+    lobes = [LobeState(np.arange(n), cloud.mean(axis=0), v, f, True, np.zeros((2, 3)), 0, 0),
+             _box_lobe((0.14, -0.01, 0.19), (0.16, 0.01, 0.21), np.array([n]), pts)]
+    mains = BranchSet()
+    add_branch(mains, np.c_[np.zeros(41), np.zeros(41), np.linspace(0.0, 0.4, 41)], -1, -1)
+    unwrap(lobes, 1, mains, pts, 1 / 13)  # these carve only at a larger radius: kept as they were
+    q = rng.uniform(cloud.min(axis=0), cloud.max(axis=0), (800, 3))
+    inside_new = winding_numbers(lobes[0].hull_vertices, lobes[0].hull_faces, q) > 0.5
+    assert inside_new.any() and not (inside_new & (winding_numbers(v, f, q) <= 0.5)).any()
 
 
 def test_a_new_lobe_beside_a_trunk_wrapped_by_a_kept_lobe_gets_a_clear_branch(rng):

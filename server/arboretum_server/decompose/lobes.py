@@ -6,7 +6,8 @@ triangles that belong to exactly one kept tetrahedron, each oriented away from i
 boundary is always closed (watertight), unlike open3d's alpha meshes of surface-like clusters
 (FACTS.md). When the kept tetrahedra miss more than ``MIN_COVER`` of the cluster's points, or the
 cluster is degenerate (fewer than 4 points, flat), we fall back to the convex hull (jittered for flat or
-tiny clusters), oriented outward.
+tiny clusters), oriented outward. A *carved* alpha shape (``carved_hull``) also keeps out of given
+blocker points (main-branch wood a lobe wraps round, ``secondary.unwrap``).
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ MIN_COVER = 0.95
 """Smallest fraction of a cluster's points the alpha shape must touch; otherwise the convex hull."""
 PAD = 0.004
 """Half-size (0.8 m frame) of the box added around degenerate clusters before taking the hull."""
+PINCH_ROUNDS = 8
+"""Rounds of dropping the tetrahedra at pinched edges of a carved alpha shape (``alpha_shape``)."""
 
 
 def kmeans(points: np.ndarray, k: int, rng: np.random.Generator, init: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -50,11 +53,8 @@ def _circumradii(p: np.ndarray) -> np.ndarray:
     return r
 
 
-PINCH_ROUNDS = 8
-"""Rounds of dropping the tetrahedra at pinched edges of a carved alpha shape (``alpha_shape``)."""
-
-
-def alpha_shape(points: np.ndarray, radius: float, blockers: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+def alpha_shape(points: np.ndarray, radius: float,
+                blockers: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray] | None:
     """Closed alpha shape (vertices (V, 3), outward faces (F, 3) int32) of ``points``, or None.
 
     ``blockers`` (B, 3) join the Delaunay tetrahedralisation and every tetrahedron touching one is
@@ -104,6 +104,7 @@ def _boundary(tets: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _edge_keys(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Undirected edge keys (E,) int64 of the vertex pairs ``a``, ``b`` (E,) (indices < 2**31)."""
     lo, hi = np.minimum(a, b).astype(np.int64), np.maximum(a, b).astype(np.int64)
     return lo * (1 << 32) + hi
 
@@ -182,14 +183,30 @@ def lobe_hull(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray
     return v, f, False
 
 
-def carved_hull(points: np.ndarray, radius: float, blockers: np.ndarray | None) -> tuple[np.ndarray, np.ndarray] | None:
-    """The first closed, one-piece alpha shape of ``points`` over ``RADIUS_STEPS`` that does not span
-    ``blockers`` (see ``alpha_shape``), or None."""
-    for step in RADIUS_STEPS:
+def carved_hull(points: np.ndarray, radius: float, blockers: np.ndarray | None,
+                steps: tuple[float, ...] = RADIUS_STEPS) -> tuple[np.ndarray, np.ndarray] | None:
+    """(vertices (V, 3), outward faces (F, 3) int32): the first closed, one-piece alpha shape of
+    ``points`` (N, 3) over the probe radii ``radius * steps`` that does not span ``blockers`` (B, 3) or
+    None (see ``alpha_shape``); None if there is none.
+
+    At one radius the carved shape lies inside the plain one: adding points to a Delaunay
+    tetrahedralisation only removes tetrahedra among the old points, and carving only drops more.
+    """
+    for step in steps:
         shape = alpha_shape(points, radius * step, blockers)
         if shape is not None and is_closed_manifold(shape[1]):
             return shape
     return None
+
+
+def plain_steps(points: np.ndarray, radius: float) -> tuple[float, ...]:
+    """The ``RADIUS_STEPS`` up to the one ``lobe_hull`` used for ``points`` (all of them for a convex hull,
+    which holds every alpha shape): carving within these never grows the hull."""
+    for i, step in enumerate(RADIUS_STEPS):
+        shape = alpha_shape(points, radius * step)
+        if shape is not None and is_closed_manifold(shape[1]):
+            return RADIUS_STEPS[: i + 1]
+    return RADIUS_STEPS
 
 
 def winding_numbers(vertices: np.ndarray, faces: np.ndarray, q: np.ndarray) -> np.ndarray:

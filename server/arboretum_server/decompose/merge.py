@@ -164,11 +164,11 @@ def select_mains(paths: list[np.ndarray], n_main: int, tau: float, step: float) 
     novelty = reach(chosen[0])
     gap = cKDTree(paths[chosen[0]]).query(verts)[0]
     while len(chosen) < n_main:
-        spread = np.maximum.reduceat(gap, starts)
-        score = np.sqrt(np.maximum(novelty, 0.0) * spread)
+        # a path with less than two steps of new wood is no candidate, however far it spreads
+        score = np.where(novelty >= 2 * step, np.sqrt(novelty * np.maximum.reduceat(gap, starts)), -1.0)
         score[chosen] = -1
         best = int(np.argmax(score))
-        if novelty[best] < 2 * step:
+        if score[best] < 0:
             break
         chosen.append(best)
         novelty = np.minimum(novelty, reach(best))

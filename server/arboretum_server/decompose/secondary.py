@@ -28,7 +28,7 @@ from scipy.spatial import cKDTree
 
 from .graph import path_to, shortest_paths, weighted
 from .grid import BoxGrid
-from .lobes import carved_hull, lobe_hull, winding_numbers
+from .lobes import RADIUS_STEPS, carved_hull, lobe_hull, plain_steps, winding_numbers
 from .merge import BranchSet, centre_paths, merge_secondaries, resample_step
 from .options import DecomposeOptions
 from .smooth import smooth_polylines, vertex_limits
@@ -155,19 +155,24 @@ def bent_fallback(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndar
 
 
 def unwrap(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, radius: float,
-           near: int = 48, step: float = 0.005) -> int:
-    """Carve the main branches out of the foreign lobes that enclose the ``near`` main-branch points nearest
-    lobe ``j``'s centre; returns how many lobes changed (``lobes`` is updated in place).
+           near: int = 64, step: float = 0.005) -> int:
+    """Carve the main branches out of the foreign lobes that enclose one of the ``near`` main-branch
+    vertices nearest lobe ``j``'s centre (the starts ``straight_fallback`` tries); returns how many lobes
+    changed (``lobes`` is updated in place).
 
     A lobe's alpha shape (probe radius 7.7 cm at the 0.8 m scale) fills the gap where a main branch runs
     through its foliage, so a secondary branch leaving that main branch starts inside a lobe it does not
-    feed (the pine's lobes wrap its trunk). Each such lobe is rebuilt with the main branches inside it
-    (resampled every ``step``) as blockers (``lobes.alpha_shape``): it then reaches up to the wood but not
-    across it. Only hulls change (members, centres and branches stay), and they only shrink, so no
-    other branch starts crossing. A lobe whose carved shape is not a closed one-piece surface is kept.
+    feed (the pine's lobes wrap its trunk). Each such lobe is rebuilt with the main branches (resampled
+    every ``step``) within one probe radius of its points as blockers (``lobes.carved_hull``), at most at
+    the probe radius its plain alpha shape used: it then reaches up to the wood but not across it, and
+    lies inside the hull it replaces, so no other branch starts crossing. Only hulls change (members,
+    centres and branches stay); a lobe wrapped round a trunk can lose its own centre to the tunnel. The
+    same blockers every time, so carving a lobe again gives the same shape. A lobe whose carved shape is
+    not a closed one-piece surface is kept.
     """
-    verts = np.concatenate([resample_step(seg, step) for seg in mains.segments])
+    verts = _main_vertices(mains)[0]
     near_pts = verts[np.argsort(np.linalg.norm(verts - lobes[j].centre, axis=1))[:near]]
+    wood = np.concatenate([resample_step(seg, step) for seg in mains.segments])
     changed = 0
     for k in range(len(lobes)):
         lb = lobes[k]
@@ -177,8 +182,11 @@ def unwrap(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, ra
         c = near_pts[((near_pts > lo) & (near_pts < hi)).all(axis=1)]
         if not len(c) or not (winding_numbers(lb.hull_vertices, lb.hull_faces, c) > 0.5).any():
             continue
-        inbox = verts[((verts > lo) & (verts < hi)).all(axis=1)]
-        shape = carved_hull(pts[lb.members], radius, inbox[winding_numbers(lb.hull_vertices, lb.hull_faces, inbox) > 0.5])
+        members = pts[lb.members]
+        lo, hi = members.min(axis=0) - radius, members.max(axis=0) + radius
+        blockers = wood[((wood > lo) & (wood < hi)).all(axis=1)]
+        steps = plain_steps(members, radius) if lb.alpha else RADIUS_STEPS
+        shape = carved_hull(members, radius, blockers, steps)
         if shape is not None:
             lobes[k] = replace(lb, hull_vertices=shape[0], hull_faces=shape[1], alpha=True)
             changed += 1
@@ -208,9 +216,9 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
     """Lobes over the point-index ``groups`` with hulls and routed, merged secondary branches.
 
     ``others`` are lobes kept from before (zone ids 0..len(others)-1; the new lobes follow them).
-    Returns every lobe (``others`` first, with the main branches carved out of those that wrapped the
-    start of a new lobe's branch, see ``unwrap``; then the new ones), the routing predecessors (N,) and
-    the number of branches routed again.
+    Returns every lobe (``others`` first, then the new ones; any of them may come back with the main
+    branches carved out, see ``unwrap``), the routing predecessors (N,) and the number of branches
+    routed again.
     """
     _, pred = shortest_paths(weighted(adjacency, np.where(zone >= 0, ZONE_COST, 1.0)), root)
     targets = [int(g[np.argmin(np.linalg.norm(pts[g] - c, axis=1))]) for g, c in zip(groups, centres)]
