@@ -227,6 +227,11 @@ def test_cli_stores_examples_and_saves_hbl(truth, tmp_path, capsys):
     hbl = load_record(out, HBL)
     assert len(hbl.lobes) == 10 and len(hbl.by_level(Level.MAIN)) == 4
     assert main(["decompose", str(tmp_path / "missing.xyz")]) == 2
+    for bad in ("1.5", "nan"):
+        assert main(["decompose", str(scan), "--reach-weight", bad, "--library", str(lib)]) == 2
+        assert "--reach-weight must lie in 0..1" in capsys.readouterr().err
+    with Library.open(lib) as library:  # nothing stored by the refused runs
+        assert sorted(library.ids()) == sorted(data["stored"])
 
 
 def test_virtual_scanner_leaf_off_tree_meets_the_floor():

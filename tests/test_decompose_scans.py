@@ -60,7 +60,7 @@ def test_harmonic_species_hold_the_floor(species, case):
     # dense pine whorls and missing data are the hard cases; the rest holds 3 % of height
     assert f["main_fit"] <= (0.06 if species == "pine" or case == "sector" else 0.03)
     # the 2 % over what the scan shows, equally long branches interchangeable (evaluate.py)
-    assert f["main_fit_seen"] <= (0.03 if species == "pine" else 0.02)  # pine 0.0246 (0.041 before spread)
+    assert f["main_fit_seen"] <= 0.02  # pine 0.007-0.014 (0.025-0.041 before spread-only selection for it)
     assert f["main_precision"] <= 0.01  # the main branches found lie on real wood
 
 

@@ -37,6 +37,10 @@ def test_table2_counts_and_overrides():
     assert DecomposeOptions(species="pine", n_main=3, n_lobes=7).counts() == (3, 7)
     d = DecomposeOptions(species="walnut").as_dict()
     assert (d["n_main"], d["n_lobes"], d["alpha"], d["k"], d["query_radius"], d["points"]) == (10, 46, 13.0, 5, 0.05, 12000)
+    # main-branch selection: spread alone for the excurrent pine, reach and spread equally otherwise
+    assert [DecomposeOptions(species=x).selection_weight() for x in ("Pine", "apple", "oak")] == [0.0, 0.5, 0.5]
+    assert DecomposeOptions(species="pine", reach_weight=0.7).as_dict()["reach_weight"] == 0.7
+    assert d["reach_weight"] == 0.5
 
 
 def _two_clouds(rng):
@@ -153,6 +157,13 @@ def test_select_mains_skips_a_far_spreading_path_that_adds_no_new_wood():
     loop = _path([0, 0, 0], [0, 0, 0.3], [0.3, 0, 0.3], [0.008, 0, 0.31])
     side = _path([0, 0, 0], [0, 0, 0.2], [0, 0.06, 0.2])
     assert select_mains([trunk, loop, side], 3, 0.02, 0.01) == [0, 2]
+
+
+def test_select_mains_by_spread_alone_takes_the_lateral_branch_of_an_excurrent_crown():
+    trunk = _path([0, 0, 0], [0, 0, 0.8])
+    upright = _path([0, 0, 0], [0, 0, 0.2], [0.15, 0, 0.75])
+    lateral = _path([0, 0, 0], [0, 0, 0.3], [0.0, 0.2, 0.3])
+    assert select_mains([lateral, trunk, upright], 2, 0.02, 0.01, reach_weight=0.0) == [1, 0]
 
 
 def _closed_and_outward(v, f):

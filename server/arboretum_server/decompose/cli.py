@@ -1,7 +1,8 @@
 """``arboretum decompose SCAN``: decompose a tree scan into HBL examples and store them in a library.
 
     arboretum decompose scan.xyz --species apple --library lib/ [--main N] [--lobes N]
-        [--points 12000] [--height 0.8] [--seed 0] [--save-hbl tree.npz] [--no-labels] [--json]
+        [--points 12000] [--height 0.8] [--seed 0] [--reach-weight W] [--save-hbl tree.npz] [--no-labels]
+        [--json]
 """
 
 from __future__ import annotations
@@ -26,6 +27,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--height", type=float, default=0.8, metavar="M",
                    help="output height in metres (0: keep the scan's units and position)")
     p.add_argument("--seed", type=int, default=0, help="seed for downsampling, FPS and k-means")
+    p.add_argument("--reach-weight", type=float, default=None, metavar="W",
+                   help="main branches: score reach^W x spread^(1-W); 0 for conifers (default: 0 for pine, "
+                        "0.5 otherwise)")
     p.add_argument("--up", choices=UP_CHOICES, default="auto", help="up axis of the file")
     p.add_argument("--no-labels", action="store_true", help="ignore leaf/wood labels stored in the file")
     p.add_argument("--save-hbl", default=None, metavar="OUT.npz", help="also save the whole-tree HBL")
@@ -44,9 +48,11 @@ def _options(args: argparse.Namespace):
             raise InputError(f"--{name} must be at least 1, got {v}")
     if args.points < 0 or args.height < 0:
         raise InputError("--points and --height must not be negative")
+    if args.reach_weight is not None and not 0.0 <= args.reach_weight <= 1.0:
+        raise InputError(f"--reach-weight must lie in 0..1, got {args.reach_weight}")
     return DecomposeOptions(
         species=args.species.lower(), n_main=args.main, n_lobes=args.lobes, points=args.points,
-        height=args.height or None, seed=args.seed, use_labels=not args.no_labels,
+        height=args.height or None, seed=args.seed, use_labels=not args.no_labels, reach_weight=args.reach_weight,
     )
 
 

@@ -136,11 +136,12 @@ def add_branch(kept: BranchSet, segment: np.ndarray, parent: int, pv: int) -> No
     kept.owner.append(owner)
 
 
-def select_mains(paths: list[np.ndarray], n_main: int, tau: float, step: float) -> list[int]:
+def select_mains(paths: list[np.ndarray], n_main: int, tau: float, step: float,
+                 reach_weight: float = 0.5) -> list[int]:
     """Indices of ``n_main`` paths: the longest, then each time the one scoring highest beyond the kept ones.
 
-    The score is the geometric mean of two readings of "new wood" (ours; measured in
-    docs/decomposition.md):
+    The score is reach ** w * spread ** (1 - w) with w = ``reach_weight``: by default the geometric mean
+    of two readings of "new wood" (ours; measured in docs/decomposition.md):
 
     - *reach*: the arc length beyond the last merged vertex, capped at ``WANDER`` times the straight
       distance from there to the tip, so paths that wander through foliage are not rewarded;
@@ -148,7 +149,8 @@ def select_mains(paths: list[np.ndarray], n_main: int, tau: float, step: float) 
 
     Reach alone rewards paths that climb beside a kept branch just outside the merge threshold (through
     foliage, or up the far side of a trunk the scan saw only in part) or hop between a conifer's crowded
-    whorls; spread alone prefers short lateral branches to long upright ones.
+    whorls; spread alone prefers short lateral branches to long upright ones, which is right for an
+    excurrent crown (the pine: w = 0, ``options.REACH_WEIGHTS``).
     """
     lens = np.array([len(p) for p in paths])
     tips = np.array([p[-1] for p in paths])
@@ -165,7 +167,8 @@ def select_mains(paths: list[np.ndarray], n_main: int, tau: float, step: float) 
     gap = cKDTree(paths[chosen[0]]).query(verts)[0]
     while len(chosen) < n_main:
         # a path with less than two steps of new wood is no candidate, however far it spreads
-        score = np.where(novelty >= 2 * step, np.sqrt(novelty * np.maximum.reduceat(gap, starts)), -1.0)
+        spread = np.maximum.reduceat(gap, starts)
+        score = np.where(novelty >= 2 * step, novelty ** reach_weight * spread ** (1.0 - reach_weight), -1.0)
         score[chosen] = -1
         best = int(np.argmax(score))
         if score[best] < 0:

@@ -20,6 +20,10 @@ SPECIES_COUNTS: dict[str, tuple[int, int]] = {
     "walnut": (10, 46),
 }
 """VRTree Table 2: species -> (N_m, N_s = N_l), in the appendix's species order."""
+REACH_WEIGHTS: dict[str, float] = {"pine": 0.0}
+"""Species whose main branches are chosen by spread alone (``DecomposeOptions.reach_weight``): in an
+excurrent crown (one leader, lateral whorls: the conifers) the main branches are the ones reaching
+farthest from the leader. Every other species weighs reach and spread equally (0.5)."""
 DEFAULT_COUNTS = (8, 40)
 """(N_m, N_l) for a species Table 2 does not list: the table's medians."""
 WORK_HEIGHT = 0.8
@@ -56,6 +60,9 @@ class DecomposeOptions:
     """Shape-context histogram bins: (log-radius, azimuth, elevation)."""
     step: float = 0.01
     """Vertex spacing of output branches at the 0.8 m scale."""
+    reach_weight: float | None = None
+    """Main-branch selection scores candidates by reach ** w * spread ** (1 - w) (``merge.select_mains``);
+    None: 0 for the species in ``REACH_WEIGHTS`` (pine), 0.5 otherwise."""
     edge_power: float = 1.0
     """Main-branch routing uses edge length ** edge_power (1: the paper's Euclidean weights)."""
     leaf_edge_cost: float = 3.0
@@ -80,6 +87,12 @@ class DecomposeOptions:
         n_m, n_l = SPECIES_COUNTS.get(self.species.lower(), DEFAULT_COUNTS)
         return (self.n_main or n_m, self.n_lobes or n_l)
 
+    def selection_weight(self) -> float:
+        """The reach weight w of main-branch selection after applying species defaults."""
+        if self.reach_weight is not None:
+            return float(self.reach_weight)
+        return REACH_WEIGHTS.get(self.species.lower(), 0.5)
+
     @property
     def alpha_radius(self) -> float:
         """Alpha-shape probe radius at the 0.8 m scale (1 / alpha)."""
@@ -90,4 +103,5 @@ class DecomposeOptions:
         d = dataclasses.asdict(self)
         d["sc_bins"] = list(self.sc_bins)
         d["n_main"], d["n_lobes"] = self.counts()
+        d["reach_weight"] = self.selection_weight()
         return d

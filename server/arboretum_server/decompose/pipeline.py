@@ -117,7 +117,7 @@ def main_branches(pts: np.ndarray, lab: np.ndarray, adjacency, root: int, grid: 
     ends = farthest_points(pts, o.fps_candidates + 1, root)
     ends = ends[ends != root][: o.fps_candidates]
     paths = branch_paths([int(e) for e in ends], pred, pts, grid, o.step)
-    order = select_mains(paths, o.counts()[0], tau, o.step)
+    order = select_mains(paths, o.counts()[0], tau, o.step, o.selection_weight())
     return smooth_branchset(merge_mains(paths, order, tau, o.resample, o.sc_bins), tree)
 
 
