@@ -330,6 +330,34 @@ def test_unwrap_carves_the_trunk_out_of_a_lobe_wrapped_round_it(rng):
     assert np.array_equal(carved.members, wrapped.members) and carved.segment is wrapped.segment
 
 
+def test_carving_is_undone_when_it_does_not_clear_the_lobe_and_skipped_for_a_buried_centre(rng, monkeypatch):
+    # A full ring of foliage round the trunk: carving the trunk out of it still leaves the ring between
+    # the trunk and the lobe outside it, so the carve is undone. A lobe whose centre lies inside another
+    # (inserted among its points) is not even tried.
+    from arboretum_server.decompose import secondary
+    from arboretum_server.decompose.merge import BranchSet, add_branch
+    from arboretum_server.decompose.secondary import _unwrapped_fallback, boxes
+    from arboretum_server.decompose.state import LobeState
+
+    ring = _ring(rng)
+    pts = np.vstack([ring, [[0.12, 0.0, 0.15]]])
+    v, f, _ = lobe_hull(ring, 1 / 13)
+    wrapped = LobeState(np.arange(len(ring)), ring.mean(axis=0), v, f, True, np.zeros((2, 3)), 0, 0)
+    outside = _box_lobe((0.11, -0.01, 0.14), (0.13, 0.01, 0.16), np.array([len(ring)]), pts)
+    mains = BranchSet()
+    add_branch(mains, np.c_[np.zeros(31), np.zeros(31), np.linspace(0.0, 0.3, 31)], -1, -1)
+    lobes = [wrapped, outside]
+    route, _ = _unwrapped_fallback(lobes, 1, mains, pts, 1 / 13, boxes(lobes))
+    assert route is None and lobes[0] is wrapped  # carved, still blocked by the ring: undone
+    buried = _box_lobe((-0.01, 0.025, 0.14), (0.01, 0.035, 0.16), np.array([0]), pts)
+    buried = LobeState(buried.members, np.array([0.0, 0.03, 0.15]), buried.hull_vertices, buried.hull_faces,
+                       False, buried.segment, 0, 0)
+    lobes, tried = [wrapped, buried], []
+    monkeypatch.setattr(secondary, "unwrap", lambda *args, **kw: tried.append(1) or 0)
+    route, _ = _unwrapped_fallback(lobes, 1, mains, pts, 1 / 13, boxes(lobes))
+    assert route is None and lobes[0] is wrapped and not tried
+
+
 @pytest.mark.parametrize("seed", [14, 30, 69])
 def test_unwrap_never_grows_a_lobe(seed):
     # Clusters round a trunk whose carved shape closes only at a larger probe radius than their plain one

@@ -193,6 +193,24 @@ def unwrap(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, ra
     return changed
 
 
+def _unwrapped_fallback(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, radius: float,
+                        box: tuple[np.ndarray, np.ndarray]):
+    """The straight or bent repair for lobe ``j`` after ``unwrap``; (route or None, lobe boxes).
+
+    Skipped when the lobe's centre lies inside a foreign lobe (no route ends clear: a lobe inserted
+    among another's points); the carving is undone when it does not clear the lobe after all.
+    """
+    if inside_foreign(lobes, j, lobes[j].centre[None], box)[0]:
+        return None, box
+    before = list(lobes)
+    if not unwrap(lobes, j, mains, pts, radius):
+        return None, box
+    fallback = straight_fallback(lobes, j, mains) or bent_fallback(lobes, j, mains, pts)
+    if fallback is None:
+        lobes[:] = before
+    return fallback, boxes(lobes)
+
+
 def clear_smooth(lobes: list[LobeState], j: int, raw: np.ndarray, smooth: np.ndarray, tol: float,
                  box: tuple[np.ndarray, np.ndarray], tree: cKDTree) -> np.ndarray | None:
     """Lobe ``j``'s secondary branch kept out of foreign lobes: ``smooth`` if it stays clear, else ``raw``
@@ -248,9 +266,8 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
         seg = clear_smooth(lobes, j, seg, smoothed, o.step / 2, box, tree)
         if seg is None:
             fallback = straight_fallback(lobes, j, mains) or bent_fallback(lobes, j, mains, pts)
-            if fallback is None and unwrap(lobes, j, mains, pts, o.alpha_radius):
-                box = boxes(lobes)
-                fallback = straight_fallback(lobes, j, mains) or bent_fallback(lobes, j, mains, pts)
+            if fallback is None:
+                fallback, box = _unwrapped_fallback(lobes, j, mains, pts, o.alpha_radius, box)
             seg, parent, pv = fallback or (smoothed, parent, pv)
         lobes[j] = LobeState(lb.members, lb.centre, lb.hull_vertices, lb.hull_faces, lb.alpha, seg, parent, pv)
     return lobes, pred, rerouted
