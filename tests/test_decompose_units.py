@@ -309,20 +309,28 @@ def test_carved_alpha_shape_reaches_the_wood_but_not_across_it(rng):
     assert (winding_numbers(cv, cf, mid) > 0.5).mean() > 0.9  # and still holds the foliage shell
 
 
-def test_unwrap_carves_the_trunk_out_of_a_lobe_wrapped_round_it(rng):
-    from arboretum_server.decompose.merge import BranchSet, add_branch, resample_step
-    from arboretum_server.decompose.secondary import unwrap
+def _ring_round_trunk(rng, x: float, half: float):
+    """(points, [lobe wrapped round a 0.3 m trunk, box lobe of half-size ``half`` at (x, 0, 0.15)], mains)."""
+    from arboretum_server.decompose.merge import BranchSet, add_branch
     from arboretum_server.decompose.state import LobeState
 
     ring = _ring(rng)
-    pts = np.vstack([ring, [[0.15, 0.0, 0.15]]])
+    pts = np.vstack([ring, [[x, 0.0, 0.15]]])
     v, f, _ = lobe_hull(ring, 1 / 13)
     wrapped = LobeState(np.arange(len(ring)), ring.mean(axis=0), v, f, True, np.zeros((2, 3)), 0, 0)
-    beside = _box_lobe((0.13, -0.02, 0.13), (0.17, 0.02, 0.17), np.array([len(ring)]), pts)
+    box = _box_lobe((x - half, -half, 0.15 - half), (x + half, half, 0.15 + half), np.array([len(ring)]), pts)
     mains = BranchSet()
     add_branch(mains, np.c_[np.zeros(31), np.zeros(31), np.linspace(0.0, 0.3, 31)], -1, -1)
+    return pts, [wrapped, box], mains
+
+
+def test_unwrap_carves_the_trunk_out_of_a_lobe_wrapped_round_it(rng):
+    from arboretum_server.decompose.merge import resample_step
+    from arboretum_server.decompose.secondary import unwrap
+
+    pts, lobes, mains = _ring_round_trunk(rng, 0.15, 0.02)
+    wrapped, beside = lobes
     trunk = resample_step(mains.segments[0], 0.005)
-    lobes = [wrapped, beside]
     assert unwrap(lobes, 1, mains, pts, 1 / 13) == 1
     carved = lobes[0]
     assert (winding_numbers(carved.hull_vertices, carved.hull_faces, trunk) < 0.5).all()
@@ -335,18 +343,11 @@ def test_carving_is_undone_when_it_does_not_clear_the_lobe_and_skipped_for_a_bur
     # the trunk and the lobe outside it, so the carve is undone. A lobe whose centre lies inside another
     # (inserted among its points) is not even tried.
     from arboretum_server.decompose import secondary
-    from arboretum_server.decompose.merge import BranchSet, add_branch
     from arboretum_server.decompose.secondary import _unwrapped_fallback, boxes
     from arboretum_server.decompose.state import LobeState
 
-    ring = _ring(rng)
-    pts = np.vstack([ring, [[0.12, 0.0, 0.15]]])
-    v, f, _ = lobe_hull(ring, 1 / 13)
-    wrapped = LobeState(np.arange(len(ring)), ring.mean(axis=0), v, f, True, np.zeros((2, 3)), 0, 0)
-    outside = _box_lobe((0.11, -0.01, 0.14), (0.13, 0.01, 0.16), np.array([len(ring)]), pts)
-    mains = BranchSet()
-    add_branch(mains, np.c_[np.zeros(31), np.zeros(31), np.linspace(0.0, 0.3, 31)], -1, -1)
-    lobes = [wrapped, outside]
+    pts, lobes, mains = _ring_round_trunk(rng, 0.12, 0.01)
+    wrapped = lobes[0]
     route, _ = _unwrapped_fallback(lobes, 1, mains, pts, 1 / 13, boxes(lobes))
     assert route is None and lobes[0] is wrapped  # carved, still blocked by the ring: undone
     buried = _box_lobe((-0.01, 0.025, 0.14), (0.01, 0.035, 0.16), np.array([0]), pts)
