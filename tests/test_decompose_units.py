@@ -142,12 +142,14 @@ def test_select_mains_does_not_reward_paths_climbing_beside_a_kept_branch():
     assert select_mains([climber, trunk, lateral], 2, 0.02, 0.01) == [1, 2]
 
 
-def test_select_mains_prefers_a_long_upright_branch_to_a_short_lateral_one():
-    # Spread alone (the farthest distance from the kept branches) would pick the short lateral branch.
+@pytest.mark.parametrize(("reach_weight", "pick"), [(0.5, 2), (0.0, 0)])
+def test_select_mains_weighs_an_upright_branch_against_a_lateral_one(reach_weight, pick):
+    # The even mean takes the long upright branch; spread alone (the pine's excurrent crown) takes the
+    # short lateral one, which reaches farther from the trunk.
     trunk = _path([0, 0, 0], [0, 0, 0.8])
     upright = _path([0, 0, 0], [0, 0, 0.2], [0.15, 0, 0.75])
     lateral = _path([0, 0, 0], [0, 0, 0.3], [0.0, 0.2, 0.3])
-    assert select_mains([lateral, trunk, upright], 2, 0.02, 0.01) == [1, 2]
+    assert select_mains([lateral, trunk, upright], 2, 0.02, 0.01, reach_weight) == [1, pick]
 
 
 def test_select_mains_skips_a_far_spreading_path_that_adds_no_new_wood():
@@ -157,13 +159,6 @@ def test_select_mains_skips_a_far_spreading_path_that_adds_no_new_wood():
     loop = _path([0, 0, 0], [0, 0, 0.3], [0.3, 0, 0.3], [0.008, 0, 0.31])
     side = _path([0, 0, 0], [0, 0, 0.2], [0, 0.06, 0.2])
     assert select_mains([trunk, loop, side], 3, 0.02, 0.01) == [0, 2]
-
-
-def test_select_mains_by_spread_alone_takes_the_lateral_branch_of_an_excurrent_crown():
-    trunk = _path([0, 0, 0], [0, 0, 0.8])
-    upright = _path([0, 0, 0], [0, 0, 0.2], [0.15, 0, 0.75])
-    lateral = _path([0, 0, 0], [0, 0, 0.3], [0.0, 0.2, 0.3])
-    assert select_mains([lateral, trunk, upright], 2, 0.02, 0.01, reach_weight=0.0) == [1, 0]
 
 
 def _closed_and_outward(v, f):
