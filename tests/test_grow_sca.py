@@ -123,3 +123,34 @@ def test_unlimited_influence_fills_lobes_too(hbl, tree):
     assert tree.twig_count < t.twig_count < 6 * tree.twig_count
     per_lobe = np.bincount(t.lobe[t.lobe >= 0], minlength=len(hbl.lobes))
     assert (per_lobe > 30).all()
+
+
+def _torus(centre: np.ndarray, major: float, minor: float, n: int = 24, m: int = 12):
+    """A closed torus mesh round the vertical axis through ``centre``: (vertices, outward faces)."""
+    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, n, endpoint=False), np.linspace(0, 2 * np.pi, m, endpoint=False),
+                       indexing="ij")
+    ring = major + minor * np.cos(v)
+    verts = np.stack([ring * np.cos(u), ring * np.sin(u), minor * np.sin(v)], axis=-1).reshape(-1, 3) + centre
+    i, j = np.meshgrid(np.arange(n), np.arange(m), indexing="ij")
+    a, b = i * m + j, ((i + 1) % n) * m + j
+    c, d = ((i + 1) % n) * m + (j + 1) % m, i * m + (j + 1) % m
+    faces = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    return verts, faces.astype(np.int32)
+
+
+def test_lobe_wrapped_round_its_bud_fills():
+    """A lobe carved round the trunk holds its bud in the hole: whole-lobe pulls cancel there, so the
+    approach heads for the nearest point and twigs that would cross the hole turn back inside."""
+    h = demo_hbl(np.random.default_rng(5), n_lobes=2)
+    lb = h.lobes[0]
+    bud = h.branches[lb.branch].points[-1]
+    verts, faces = _torus(bud, 0.45, 0.2)
+    assert winding_number(verts, faces, np.array([bud, bud + [0.45, 0, 0]])).round(3).tolist() == [0.0, 1.0]
+    ring = dataclasses.replace(lb, hull_vertices=verts, hull_faces=faces, centre=bud.copy())
+    h2 = HBL(h.root, h.branches, (ring, *h.lobes[1:]))
+    t = grow_tree(h2, GrowOptions(), np.random.default_rng(0))
+    pts = t.positions[t.lobe == 0]
+    inside = winding_number(verts, faces, pts) > 0.5
+    assert inside.sum() > 150, inside.sum()
+    angle = np.arctan2(pts[inside, 1] - bud[1], pts[inside, 0] - bud[0])
+    assert np.ptp(angle) > 5.0  # twigs go round the whole ring, not just where they entered

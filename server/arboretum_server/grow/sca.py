@@ -14,8 +14,16 @@ Each iteration, for every growable node n with a non-empty set S(n) of live attr
   α = 1.6 against β = 0.3 would make every twig fall out of its lobe.
 
 S(n) is the set of live points whose nearest growable node is n within the influence distance d_i,
-except for a lobe's bud and the nodes that approach a lobe from outside its hull: those are pulled by
-every live point of their lobe (the paper's "directions from the bud to each vertex of the lobe").
+except for a bud inside its hull that owns no point: it is pulled by every live point of its lobe (the
+paper's "directions from the bud to each vertex of the lobe"). Two rules of ours keep twigs growing in
+lobes that are not convex (alpha shapes, and lobes carved round the trunk):
+
+* a node outside its hull (a bud short of its lobe, then the chain growing in from it) heads straight
+  for the nearest live point of its lobe, one step D at a time. Pulled by the whole lobe instead, a
+  bud beside a lobe that wraps round it felt pulls that cancel, and the lobe stayed bare;
+* a node inside its hull whose Eq. 2 step would leave the hull (its points lie across a concavity)
+  steps toward its nearest own point instead of growing a dead-end twig outside.
+
 A point dies when any node comes within d_k. Only nodes inside their lobe hull (and approach chains)
 may spawn, so every twig node lies inside its hull or within one step D of it. A proposed child whose
 cell (size ``min_spacing`` × D) already holds a node is refused and its parent stops growing.
@@ -159,7 +167,9 @@ def _reassign_all(st: _State, att: Attraction, sep: float, reach: float) -> None
 
 
 def _pull(st: _State, att: Attraction) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Active nodes (K,) and their V_att sums (K, 3): nearest-node sets, and whole lobes for buds.
+    """Active nodes (K,), their V_att sums (K, 3) (nearest-node sets, and whole lobes for buds inside
+    their hull) and aims (K, 3): for nodes outside their hull the nearest live point of their lobe,
+    NaN for the others.
 
     Also returns the (point, node) pairs of the nearest-node sets, (P,) each.
     """
@@ -170,7 +180,7 @@ def _pull(st: _State, att: Attraction) -> tuple[np.ndarray, np.ndarray, np.ndarr
     u = _unit(att.points[live] - st.pos[node])
     vatt = np.stack([np.bincount(node, u[:, k], minlength=n) for k in range(3)], axis=1).astype(np.float64)
     count = np.bincount(node, minlength=n)
-    whole = np.flatnonzero(st.whole_lobe & st.growable)
+    whole = np.flatnonzero(st.whole_lobe & st.growable & ~st.approach)
     if len(whole):
         lo, hi = att.starts[st.lobe[whole]], att.starts[st.lobe[whole] + 1]
         reps = hi - lo
@@ -182,8 +192,23 @@ def _pull(st: _State, att: Attraction) -> tuple[np.ndarray, np.ndarray, np.ndarr
         for k in range(3):
             vatt[:, k] += np.bincount(who, u[:, k], minlength=n)
         count += np.bincount(who, minlength=n)
+    aim = np.full((n, 3), np.nan)
+    outside = np.flatnonzero(st.approach & st.growable)
+    aim[outside] = _nearest_live(st, att, outside)
+    count[outside[np.isfinite(aim[outside, 0])]] += 1
     active = np.flatnonzero((count > 0) & st.growable)
-    return active, vatt[active], live, node
+    return active, vatt[active], aim[active], live, node
+
+
+def _nearest_live(st: _State, att: Attraction, nodes: np.ndarray) -> np.ndarray:
+    """(K, 3): the nearest live attraction point of each node's lobe (NaN where none is left)."""
+    out = np.full((len(nodes), 3), np.nan)
+    for i, n in enumerate(nodes):
+        lo, hi = att.starts[st.lobe[n]], att.starts[st.lobe[n] + 1]
+        pts = att.points[lo:hi][st.alive[lo:hi]]
+        if len(pts):
+            out[i] = pts[np.argmin(((pts - st.pos[n]) ** 2).sum(axis=1))]
+    return out
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -207,13 +232,51 @@ def _approaches(st: _State, att: Attraction, active: np.ndarray, v: np.ndarray, 
     return best > step / 2
 
 
-def _grow(st: _State, att: Attraction, headings: np.ndarray, opts: GrowOptions, step: float) -> np.ndarray:
-    """Propose one child per active node (Eq. 2); returns the indices of the accepted children."""
-    active, vatt, pts, owner = _pull(st, att)
-    if not len(active):
-        return np.zeros(0, np.int64)
+def _nearest_own(st: _State, att: Attraction, active: np.ndarray, sel: np.ndarray, pts: np.ndarray,
+                 owner: np.ndarray) -> np.ndarray:
+    """(S, 3): for the active nodes ``active[sel]``, the nearest point of their own set S(n)."""
+    slot = np.full(len(st.pos), -1, np.int64)
+    slot[active[sel]] = np.arange(int(sel.sum()))
+    k = slot[owner]
+    ok = k >= 0
+    d = ((att.points[pts[ok]] - st.pos[owner[ok]]) ** 2).sum(1)
+    order = np.lexsort((d, k[ok]))
+    kk = k[ok][order]
+    first = order[np.r_[True, kk[1:] != kk[:-1]]] if len(order) else order
+    out = np.full((int(sel.sum()), 3), np.nan)
+    out[k[ok][first]] = att.points[pts[ok][first]]
+    return out
+
+
+def _step_toward(pos: np.ndarray, aim: np.ndarray, v: np.ndarray, child: np.ndarray, step: float) -> None:
+    """Where ``aim`` (K, 3) is finite, turn ``v`` to it and move ``child`` one step D that way."""
+    toward = np.isfinite(aim[:, 0])
+    v[toward] = _unit(aim[toward] - pos[toward])
+    child[toward] = pos[toward] + step * v[toward]
+
+
+def _propose(st: _State, att: Attraction, headings: np.ndarray, opts: GrowOptions, step: float,
+             active: np.ndarray, vatt: np.ndarray, aim: np.ndarray, pts: np.ndarray,
+             owner: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Direction (K, 3), child position (K, 3) and whether the child lies in its hull (K,) per active
+    node: Eq. 2, or straight for ``aim`` (K, 3) where it is finite or where Eq. 2 leaves the hull."""
     v = _unit(headings[st.lobe[active]] + opts.alpha * np.asarray(GRAVITY) + opts.beta * vatt)
     child = st.pos[active] + step * v
+    is_in = inside(att.index, child, st.lobe[active])
+    out = ~is_in & ~st.whole_lobe[active]
+    aim[out] = _nearest_own(st, att, active, out, pts, owner)
+    moved = np.isfinite(aim[:, 0])
+    _step_toward(st.pos[active], aim, v, child, step)
+    is_in[moved] = inside(att.index, child[moved], st.lobe[active[moved]])
+    return v, child, is_in
+
+
+def _grow(st: _State, att: Attraction, headings: np.ndarray, opts: GrowOptions, step: float) -> np.ndarray:
+    """Propose one child per active node (Eq. 2); returns the indices of the accepted children."""
+    active, vatt, aim, pts, owner = _pull(st, att)
+    if not len(active):
+        return np.zeros(0, np.int64)
+    v, child, is_in = _propose(st, att, headings, opts, step, active, vatt, aim, pts, owner)
     keys = _cells(child, step * max(opts.min_spacing, 1e-6))
     _, first = np.unique(keys, return_index=True)
     fresh = np.zeros(len(child), bool)
@@ -226,9 +289,8 @@ def _grow(st: _State, att: Attraction, headings: np.ndarray, opts: GrowOptions, 
     blocked = st.best_node >= 0
     blocked[blocked] = ~st.growable[st.best_node[blocked]]
     st.best_node[blocked], st.best_d[blocked] = -1, np.inf
-    parent, child, keys = active[fresh], child[fresh], keys[fresh]
+    parent, child, keys, is_in = active[fresh], child[fresh], keys[fresh], is_in[fresh]
     lobe = st.lobe[parent]
-    is_in = inside(att.index, child, lobe)
     approach = st.approach[parent] & ~is_in
     keys = np.sort(keys)
     st.cells = np.insert(st.cells, np.searchsorted(st.cells, keys), keys)
