@@ -427,3 +427,33 @@ def test_main_fit_seen_treats_tied_lengths_as_interchangeable_and_skips_unseen_w
     assert np.isclose(main_fit_seen(per, np.array([1.0, 0.6, 0.3]), 2, 1.0), 0.05)  # seen 0.18 < 0.3
     assert np.isclose(main_fit_seen(per, np.array([1.0, 0.6, 0.1]), 2, 1.0), 0.0)  # the seen part: d = 0
     assert np.isclose(main_fit_seen(per, np.array([1.0, 0.6, 0.5]), 2, 2.0), 0.025)  # 0.5 seen beats 0.18
+
+
+def test_part_overlaps_frees_a_centre_buried_in_a_neighbour(rng):
+    # A user's selection (ball) taken out of a lobe wraps round it (a shell open towards +x): the shell's
+    # alpha shape (probe 7.7 cm, larger than the shell) fills the hole and buries the ball's centre,
+    # so no branch could reach it. Afterwards the centre lies in no other lobe, the shell has not grown,
+    # and the centre is the ball's mean or one of its own points.
+    from arboretum_server.decompose.merge import BranchSet, add_branch
+    from arboretum_server.decompose.secondary import inside_foreign, part_overlaps
+    from arboretum_server.decompose.state import LobeState
+
+    c = np.array([0.12, 0.0, 0.2])
+    ball = c + rng.normal(0, 0.008, (60, 3))
+    d = rng.normal(size=(600, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    shell = c + d[d[:, 0] < 0.5][:400] * rng.uniform(0.045, 0.055, (400, 1))
+    pts = np.vstack([shell, ball])
+    v, f, _ = lobe_hull(shell, 1 / 13)
+    vb, fb, _ = lobe_hull(ball, 1 / 13)
+    lobes = [LobeState(np.arange(400), shell.mean(axis=0), v, f, True, np.zeros((2, 3)), 0, 0),
+             LobeState(np.arange(400, 460), ball.mean(axis=0), vb, fb, True, np.zeros((0, 3)), -1, -1)]
+    assert inside_foreign(lobes, 1, ball.mean(axis=0)[None])[0]
+    mains = BranchSet()
+    add_branch(mains, np.c_[np.zeros(41), np.zeros(41), np.linspace(0.0, 0.4, 41)], -1, -1)
+    part_overlaps(lobes, 1, mains, pts, 1 / 13)
+    assert not inside_foreign(lobes, 1, lobes[1].centre[None])[0]
+    assert np.allclose(lobes[1].centre, ball.mean(axis=0)) or (np.abs(ball - lobes[1].centre).sum(1) < 1e-12).any()
+    q = rng.uniform(shell.min(axis=0), shell.max(axis=0), (800, 3))
+    now = winding_numbers(lobes[0].hull_vertices, lobes[0].hull_faces, q) > 0.5
+    assert not (now & (winding_numbers(v, f, q) <= 0.5)).any()

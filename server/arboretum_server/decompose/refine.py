@@ -2,8 +2,10 @@
 split lobes. Each is a pure function ``Decomposition -> Decomposition`` that redoes only what it must:
 hulls and secondary branches of the lobes it creates (one Dijkstra on the cached graph, Algorithm 1
 step 2 against the cached main branches; a kept lobe wrapped round the main branch where a new branch
-must start is carved, ``secondary.unwrap``), then the radii and records. A kept lobe that loses points
-gets a plain alpha shape again. Point indices refer to
+must start is carved, ``secondary.unwrap``), then the radii and records. A lobe that loses points to
+``insert_lobe`` is rebuilt like a new one (centre, hull, branch), and a kept lobe whose branch would run
+through a new lobe is routed again with them. Lobes keep their order; new ones come last (a lobe that
+loses all its points is dropped). Point indices refer to
 ``Decomposition.points``; strokes are in the HBL's output frame.
 """
 
@@ -16,9 +18,12 @@ import numpy as np
 
 from arboretum_library.errors import InputError
 
-from .lobes import kmeans, lobe_hull
-from .secondary import make_lobes, zones
+from .lobes import kmeans
+from .secondary import boxes, foreign, make_lobes, zones
 from .state import Decomposition, LobeState, build_hbl
+
+ROUTE_ROUNDS = 3
+"""Rounds of routing kept lobes again whose branches run through new lobes (each round adds lobes)."""
 
 
 def _lobe_index(d: Decomposition, j: int) -> int:
@@ -28,19 +33,48 @@ def _lobe_index(d: Decomposition, j: int) -> int:
 
 
 def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], centres: np.ndarray,
-            t0: float, op: str) -> Decomposition:
-    """Route the new lobes over ``groups`` after ``kept`` and rebuild the records."""
-    lobes = tuple(kept)
-    if groups:  # kept lobes come back first, carved where they wrapped the start of a new branch
+            t0: float, op: str, order: list[int] | None = None) -> Decomposition:
+    """Route the new lobes over ``groups`` after ``kept`` and rebuild the records.
+
+    A kept lobe whose secondary branch would run through a new lobe is routed again with them.
+    ``order`` (one slot per kept lobe and group, in that order) gives each lobe's place in the result.
+    """
+    kept, groups, centres = list(kept), list(groups), list(centres)
+    slots = list(order) if order is not None else list(range(len(kept) + len(groups)))
+    lobes: list[LobeState] = list(kept)
+    for _ in range(ROUTE_ROUNDS):
+        if not groups:
+            break
         zone = zones(d.points, [lb.members for lb in kept] + groups)
-        lobes = tuple(make_lobes(groups, centres, d.points, d.adjacency, d.root_index, zone, d.mains, d.grid,
-                                 d.tau, d.options, lobes)[0])
+        lobes = make_lobes(groups, np.array(centres), d.points, d.adjacency, d.root_index, zone, d.mains,
+                           d.grid, d.tau, d.options, tuple(kept))[0]
+        cross = _crossing_new(lobes, len(kept), d.options.step / 2)
+        if not cross:
+            break
+        back = [slots[i] for i in range(len(kept)) if i not in cross] + [slots[i] for i in cross]
+        slots = back + slots[len(kept):]
+        groups = [kept[i].members for i in cross] + groups
+        centres = [kept[i].centre for i in cross] + centres
+        kept = [lb for i, lb in enumerate(kept) if i not in cross]
+    lobes = [lb for _, lb in sorted(zip(slots, lobes), key=lambda t: t[0])]
     lobe_of = np.full(len(d.points), -1, np.int32)
     for j, lb in enumerate(lobes):
         lobe_of[lb.members] = j
     stats = dict(d.stats, lobes=len(lobes))
-    out = replace(d, lobes=lobes, lobe_of=lobe_of, stats=stats, timing=dict(d.timing, **{op: time.perf_counter() - t0}))
+    out = replace(d, lobes=tuple(lobes), lobe_of=lobe_of, stats=stats,
+                  timing=dict(d.timing, **{op: time.perf_counter() - t0}))
     return replace(out, hbl=build_hbl(out))
+
+
+def _crossing_new(lobes: list[LobeState], n_kept: int, tol: float) -> set[int]:
+    """Kept lobes (indices < ``n_kept``) whose secondary branch enters one of the lobes after them."""
+    new = lobes[n_kept:]
+    out = set()
+    for i, lb in enumerate(lobes[:n_kept]):
+        sub = [lb, *new]
+        if foreign(sub, 0, lb.segment, tol, boxes(sub)):
+            out.add(i)
+    return out
 
 
 def remove_lobe(d: Decomposition, j: int) -> Decomposition:
@@ -50,29 +84,36 @@ def remove_lobe(d: Decomposition, j: int) -> Decomposition:
     return _finish(d, [lb for k, lb in enumerate(d.lobes) if k != j], [], np.zeros((0, 3)), t0, "remove_lobe")
 
 
-def _take(d: Decomposition, lobes: list[LobeState], taken: np.ndarray) -> list[LobeState]:
-    """``lobes`` with the points ``taken`` removed (new hulls for the ones that lost points; empty dropped)."""
+def _take(d: Decomposition, taken: np.ndarray) -> tuple[list[LobeState], list[np.ndarray], list[int], list[int]]:
+    """The lobes with the points ``taken`` removed: (untouched lobes, the remaining members of the lobes
+    that lost points (empty ones dropped), and the original index of each, in the same two orders)."""
     mask = np.zeros(len(d.points), bool)
     mask[taken] = True
-    out = []
-    for lb in lobes:
+    kept, shrunk, at_kept, at_shrunk = [], [], [], []
+    for k, lb in enumerate(d.lobes):
         keep = lb.members[~mask[lb.members]]
         if len(keep) == len(lb.members):
-            out.append(lb)
+            kept.append(lb)
+            at_kept.append(k)
         elif len(keep):
-            v, f, a = lobe_hull(d.points[keep], d.options.alpha_radius)
-            out.append(replace(lb, members=keep, hull_vertices=v, hull_faces=f, alpha=a))
-    return out
+            shrunk.append(keep)
+            at_shrunk.append(k)
+    return kept, shrunk, at_kept, at_shrunk
 
 
 def insert_lobe(d: Decomposition, indices: np.ndarray) -> Decomposition:
-    """A new lobe over the selected point ``indices`` (taken from the lobes that held them)."""
+    """A new lobe over the selected point ``indices``, taken from the lobes that held them: those get a
+    new centre (their remaining points' mean), hull and secondary branch; the new lobe comes last."""
     t0 = time.perf_counter()
     idx = np.unique(np.asarray(indices, dtype=np.int64).reshape(-1))
     if len(idx) == 0 or idx.min() < 0 or idx.max() >= len(d.points):
         raise InputError(f"insert lobe: select 1 or more point indices in 0..{len(d.points) - 1}")
-    kept = _take(d, list(d.lobes), idx)
-    return _finish(d, kept, [idx], d.points[idx].mean(axis=0)[None], t0, "insert_lobe")
+    kept, shrunk, at_kept, at_shrunk = _take(d, idx)
+    groups = [*shrunk, idx]
+    centres = np.array([d.points[g].mean(axis=0) for g in groups])
+    rank = {k: r for r, k in enumerate(sorted(at_kept + at_shrunk))}
+    order = [rank[k] for k in at_kept + at_shrunk] + [len(rank)]
+    return _finish(d, kept, groups, centres, t0, "insert_lobe", order)
 
 
 def merge_lobes(d: Decomposition, which: list[int]) -> Decomposition:

@@ -182,14 +182,50 @@ def unwrap(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, ra
         c = near_pts[((near_pts > lo) & (near_pts < hi)).all(axis=1)]
         if not len(c) or not (winding_numbers(lb.hull_vertices, lb.hull_faces, c) > 0.5).any():
             continue
-        members = pts[lb.members]
-        lo, hi = members.min(axis=0) - radius, members.max(axis=0) + radius
-        blockers = wood[((wood > lo) & (wood < hi)).all(axis=1)]
-        steps = plain_steps(members, radius) if lb.alpha else RADIUS_STEPS
-        shape = carved_hull(members, radius, blockers, steps)
-        if shape is not None:
-            lobes[k] = replace(lb, hull_vertices=shape[0], hull_faces=shape[1], alpha=True)
+        if _carve(lobes, k, pts, wood, radius):
             changed += 1
+    return changed
+
+
+def _carve(lobes: list[LobeState], k: int, pts: np.ndarray, blockers: np.ndarray, radius: float) -> bool:
+    """Rebuild lobe ``k``'s hull with the ``blockers`` (B, 3) within one probe radius of its points kept
+    out, at most at its plain probe radius (in place); False when the carved shape is not usable."""
+    lb = lobes[k]
+    members = pts[lb.members]
+    lo, hi = members.min(axis=0) - radius, members.max(axis=0) + radius
+    near = blockers[((blockers > lo) & (blockers < hi)).all(axis=1)]
+    steps = plain_steps(members, radius) if lb.alpha else RADIUS_STEPS
+    shape = carved_hull(members, radius, near, steps)
+    if shape is None:
+        return False
+    lobes[k] = replace(lb, hull_vertices=shape[0], hull_faces=shape[1], alpha=True)
+    return True
+
+
+def part_overlaps(lobes: list[LobeState], start: int, mains: BranchSet, pts: np.ndarray, radius: float,
+                  step: float = 0.005) -> int:
+    """For each lobe from ``start`` on whose centre lies inside another lobe, carve that lobe with the
+    first one's points and the main branches as blockers (in place); returns how many hulls changed.
+
+    k-means clusters never need it (no centre of the decomposed test trees lies in another lobe), but
+    points a user selects for ``insert_lobe`` border the lobe they came from, and the two alpha shapes
+    (probe radius about a lobe's size) overlap: neither branch could reach its centre. Carving fails
+    when the blockers split the shape; then the lobe's centre moves to its own point nearest the old
+    centre outside every other lobe (its branch ends there), when it has one.
+    """
+    wood = np.concatenate([resample_step(seg, step) for seg in mains.segments])
+    changed = 0
+    for j in range(start, len(lobes)):
+        c = lobes[j].centre[None]
+        for k in range(len(lobes)):
+            if k == j or not (winding_numbers(lobes[k].hull_vertices, lobes[k].hull_faces, c) > 0.5).any():
+                continue
+            changed += _carve(lobes, k, pts, np.concatenate([pts[lobes[j].members], wood]), radius)
+        if inside_foreign(lobes, j, c)[0]:
+            own = pts[lobes[j].members]
+            free = own[~inside_foreign(lobes, j, own)]
+            if len(free):
+                lobes[j] = replace(lobes[j], centre=free[np.argmin(np.linalg.norm(free - c, axis=1))])
     return changed
 
 
@@ -238,16 +274,20 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
     branches carved out, see ``unwrap``), the routing predecessors (N,) and the number of branches
     routed again.
     """
+    lobes = list(others)
+    for g, c in zip(groups, centres):
+        verts, faces, used_alpha = lobe_hull(pts[g], o.alpha_radius)
+        lobes.append(LobeState(g, np.asarray(c, np.float64), verts, faces, used_alpha, np.zeros((0, 3)), -1, -1))
+    part_overlaps(lobes, len(others), mains, pts, o.alpha_radius)
+    centres = [lb.centre for lb in lobes[len(others):]]
     _, pred = shortest_paths(weighted(adjacency, np.where(zone >= 0, ZONE_COST, 1.0)), root)
     targets = [int(g[np.argmin(np.linalg.norm(pts[g] - c, axis=1))]) for g, c in zip(groups, centres)]
     merged = merge_secondaries(branch_paths(targets, pred, pts, grid, o.step), mains, tau, o.resample, o.sc_bins)
-    lobes = list(others)
     raw = [_finish(seg, c) for (seg, _, _), c in zip(merged, centres)]
     tree = cKDTree(pts)
     smooth = smooth_polylines(raw, vertex_limits(raw, tree))
-    for g, c, seg, (_, parent, pv) in zip(groups, centres, smooth, merged):
-        verts, faces, used_alpha = lobe_hull(pts[g], o.alpha_radius)
-        lobes.append(LobeState(g, c, verts, faces, used_alpha, seg, parent, pv))
+    for j, (seg, (_, parent, pv)) in enumerate(zip(smooth, merged), start=len(others)):
+        lobes[j] = replace(lobes[j], segment=seg, parent=parent, parent_vertex=pv)
     rerouted = 0
     box = boxes(lobes)
     for j in range(len(others), len(lobes)):
