@@ -457,3 +457,53 @@ def test_part_overlaps_frees_a_centre_buried_in_a_neighbour(rng):
     q = rng.uniform(shell.min(axis=0), shell.max(axis=0), (800, 3))
     now = winding_numbers(lobes[0].hull_vertices, lobes[0].hull_faces, q) > 0.5
     assert not (now & (winding_numbers(v, f, q) <= 0.5)).any()
+
+
+def _gap_tree(rng):
+    """A scan-06-like cloud: a trunk to z 0.2 and a limb from it out and up to z 0.75, a branch hanging
+    from the limb's tip down to 2.5 cm from the stem, and the stem from z 0.27 to 0.8, cut from the
+    trunk by a 7 cm scan gap: the shortest edge joining it (the bridge) reaches the hanging branch.
+    Returns the points and the root index."""
+    def line(a, b, step=0.004):
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        t = np.linspace(0, 1, max(2, int(np.linalg.norm(b - a) / step)))[:, None]
+        return a + t * (b - a) + rng.normal(0, 0.001, (len(t), 3))
+    pts = np.vstack([line((0, 0, 0), (0, 0, 0.2)), line((0, 0, 0.2), (0.25, 0, 0.35)), line((0.25, 0, 0.35), (0.25, 0, 0.75)),
+                     line((0.25, 0, 0.75), (0.025, 0, 0.45)), line((0, 0, 0.27), (0, 0, 0.8))])
+    return pts, 0
+
+
+def test_a_main_branch_jumps_a_scan_gap_instead_of_climbing_down_a_limb(rng, monkeypatch):
+    from arboretum_server.decompose import pipeline
+    from arboretum_server.decompose.graph import shortcuts
+
+    pts, root = _gap_tree(rng)
+    g = knn_graph(pts, 5, 0.05)
+    assert g.components == 2 and g.bridges == 1
+    extra = shortcuts(pts, g, 0.05).tocoo()
+    length = np.linalg.norm(pts[extra.row] - pts[extra.col], axis=1)
+    assert np.allclose(extra.data, 10 * length) and length.max() <= 0.15 + 1e-9
+    foot = (pts[extra.col, 2] < 0.3) & (np.abs(pts[extra.col, 0]) < 0.005) & (pts[extra.row, 2] < 0.25)
+    assert foot.any()  # across the gap: the stem's foot to the trunk's top or the limb's base, 6-7 cm
+
+    def top_path(hook_drop):
+        monkeypatch.setattr(pipeline, "HOOK_DROP", hook_drop)
+        o = DecomposeOptions(n_main=2, n_lobes=2)
+        mains = pipeline.main_branches(pts, np.zeros(len(pts), np.uint8), g, root, pipeline.centre_grid(pts, 0.003),
+                                       0.02, o)
+        return max((mains.reference(b) for b in range(len(mains.full))), key=lambda p: p[:, 2].max())
+
+    hooked, straight = top_path(np.inf), top_path(0.05)
+    assert pipeline.drop(hooked) > 0.25  # up the limb to 0.75, down to 0.45, up the stem
+    assert pipeline.drop(straight) < 0.01 and np.abs(straight[:, 0]).max() < 0.05  # up the trunk, across the gap
+
+
+def test_main_drop_measures_the_deepest_fall_below_the_running_top():
+    from arboretum_library.model import HBL, Branch, Level
+    from arboretum_server.decompose.evaluate import main_drop
+
+    up = np.c_[np.zeros(5), np.zeros(5), np.linspace(0, 0.8, 5)]
+    hook = np.array([[0, 0, 0.2], [0.1, 0, 0.6], [0.2, 0, 0.3], [0.3, 0, 0.5]])  # up to 0.6, down to 0.3
+    hbl = HBL(np.zeros(3), (Branch(up, np.full(5, 0.01), -1, -1, Level.MAIN),
+                            Branch(hook, np.full(4, 0.01), 0, 1, Level.MAIN)), ())
+    assert np.isclose(main_drop(hbl), 0.3 / hbl.height)

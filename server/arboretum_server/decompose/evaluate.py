@@ -19,6 +19,9 @@ All distances are in the HBL's output frame; ``to_frame`` maps scan/truth coordi
 - ``crossings``: secondary branches with a vertex more than ``CROSS_TOL`` inside a lobe they do not feed.
 - ``main_turning`` / ``secondary_turning``: mean turning angle (radians) per interior vertex of the main /
   secondary branches (smoothness: graph-path zig-zag turns about 0.5 rad at every vertex).
+- ``main_drop``: the deepest fall of a main branch below the highest point it reached before, as a
+  fraction of the height (0 for branches that never turn down; a trunk path that climbs one limb and
+  comes down to reach another is a hook no tree grows).
 """
 
 from __future__ import annotations
@@ -58,6 +61,7 @@ class Metrics:
     crossings: int
     main_turning: float
     secondary_turning: float
+    main_drop: float
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -113,6 +117,15 @@ def mean_turning(hbl: HBL, level: Level) -> float:
     a = [turning_angles(hbl.branches[i].points) for i in hbl.by_level(level)]
     a = np.concatenate(a) if a else np.zeros(0)
     return float(a.mean()) if len(a) else 0.0
+
+
+def main_drop(hbl: HBL) -> float:
+    """The largest fall of a main branch below its running highest point, / height (``main_drop``)."""
+    worst = 0.0
+    for i in hbl.by_level(Level.MAIN):
+        z = hbl.branches[i].points[:, 2]
+        worst = max(worst, float((np.maximum.accumulate(z) - z).max()))
+    return worst / max(hbl.height, 1e-12)
 
 
 def connected(hbl: HBL) -> bool:
@@ -192,7 +205,7 @@ def evaluate(hbl: HBL, truth: TreeTruth, leaf_points: np.ndarray, to_frame: Call
     nm, nl = len(hbl.by_level(Level.MAIN)), len(hbl.lobes)
     return Metrics(fit, worst, seen, main_precision(hbl, branches), cover, nm, nl,
                    nm == n_main and nl == n_lobes, connected(hbl), crossings(hbl),
-                   mean_turning(hbl, Level.MAIN), mean_turning(hbl, Level.SECONDARY))
+                   mean_turning(hbl, Level.MAIN), mean_turning(hbl, Level.SECONDARY), main_drop(hbl))
 
 
 def reference_fit(hbl: HBL, starts: np.ndarray, ends: np.ndarray) -> dict[str, float]:

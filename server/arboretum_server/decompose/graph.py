@@ -16,6 +16,10 @@ from scipy.spatial import cKDTree
 
 CANDIDATES = 16
 """Neighbours queried per point for bridging candidates (beyond the K graph neighbours)."""
+SHORTCUT_REACH = 3.0
+"""``shortcuts``: components whose boxes come within this many query radii of each other are joined."""
+SHORTCUT_COST = 10.0
+"""``shortcuts``: a shortcut costs this many times its length (real wood is always preferred)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -30,6 +34,8 @@ class Graph:
     """Edges added to join them."""
     neighbours: np.ndarray
     """(N, k) int64: each point's nearest neighbours (itself excluded), for local features."""
+    component: np.ndarray | None = None
+    """(N,) int: each point's connected component before bridging (None: one component)."""
 
 
 def _edges(a: np.ndarray, b: np.ndarray, w: np.ndarray, n: int) -> csr_matrix:
@@ -53,7 +59,43 @@ def knn_graph(points: np.ndarray, k: int, radius: float) -> Graph:
         return Graph(adj, 1, 0, nb[:, 1:])
     a, b, w = _bridges(points, tree, lab, ncomp, dist[:, 1:], nb[:, 1:])
     adj = (adj + _edges(a, b, np.maximum(w, 1e-12), n)).tocsr()
-    return Graph(adj, ncomp, len(a), nb[:, 1:])
+    return Graph(adj, ncomp, len(a), nb[:, 1:], lab)
+
+
+def shortcuts(points: np.ndarray, g: Graph, radius: float) -> csr_matrix | None:
+    """Extra edges (N, N) for ``g``: between every two components (before bridging) whose boxes lie
+    within ``SHORTCUT_REACH`` x ``radius``, an edge from each point of the smaller one to its nearest
+    point of the other within that reach, weighted ``SHORTCUT_COST`` x its length; None for a graph of
+    one component or when no two components come that close.
+
+    The bridges of ``knn_graph`` join each component by its globally shortest edges, which can hang a
+    trunk's upper part off a neighbouring limb where a scan gap cuts it from the fork below: the path to
+    the top then climbs the limb and comes back down (scan 06). With these edges Dijkstra can jump the
+    gap instead when that saves more than the penalty. ``pipeline.main_branches`` uses them only for
+    paths that turn down and up again like that.
+    """
+    if g.component is None:
+        return None
+    lab = g.component
+    groups = np.split(np.argsort(lab, kind="stable"), np.cumsum(np.bincount(lab))[:-1])
+    lo = np.array([points[ix].min(axis=0) for ix in groups])
+    hi = np.array([points[ix].max(axis=0) for ix in groups])
+    reach = SHORTCUT_REACH * radius
+    near = ((lo[:, None] - reach <= hi[None]) & (lo[None] - reach <= hi[:, None])).all(axis=2)
+    trees: dict[int, cKDTree] = {}
+    a, b, w = [], [], []
+    for i, j in zip(*np.nonzero(np.triu(near, 1))):
+        small, big = (i, j) if len(groups[i]) <= len(groups[j]) else (j, i)
+        if big not in trees:
+            trees[big] = cKDTree(points[groups[big]])
+        d, k = trees[big].query(points[groups[small]], distance_upper_bound=reach)
+        ok = np.isfinite(d)
+        a.append(groups[small][ok])
+        b.append(groups[big][k[ok]])
+        w.append(SHORTCUT_COST * np.maximum(d[ok], 1e-12))
+    if not a or not sum(len(x) for x in a):
+        return None
+    return _edges(np.concatenate(a), np.concatenate(b), np.concatenate(w), len(points))
 
 
 def _bridges(points, tree, lab, ncomp, dist, nb):

@@ -18,7 +18,7 @@ from scipy.spatial import cKDTree
 from arboretum_library.model import LEAF, WOOD
 from arboretum_library.progress import ProgressFn, no_progress
 
-from .graph import knn_graph, shortest_paths, weighted
+from .graph import Graph, knn_graph, shortcuts, shortest_paths, weighted
 from .grid import BoxGrid
 from .lobes import kmeans
 from .merge import merge_mains, select_mains
@@ -38,6 +38,10 @@ CROWN_BASE = 0.04
 """Points below this height (0.8 m frame, 5 % of the tree) never join the foliage (buttresses, ground)."""
 BARE_TRUNK_RADII = 2.5
 """Guessed leaf points below the crown base within this many local trunk radii of the trunk are wood."""
+HOOK_DROP = 0.05
+"""A main-branch candidate falling more than this fraction of the height below a point it reached
+before is routed again across scan gaps (``main_branches``); drooping tips of the synthetic trees fall
+up to 0.15, but there the rerouted path falls as far and is not taken."""
 
 
 class _Clock:
@@ -108,15 +112,32 @@ def centre_grid(pts: np.ndarray, r_trunk: float) -> BoxGrid:
     return BoxGrid(pts, max(CENTRE_RADIUS, 1.5 * r_trunk) / 1.5)
 
 
-def main_branches(pts: np.ndarray, lab: np.ndarray, adjacency, root: int, grid: BoxGrid, tau: float,
+def drop(path: np.ndarray) -> float:
+    """How far ``path`` (L, 3) falls below the highest point it reached before (0 if it never turns down)."""
+    z = path[:, 2]
+    return float((np.maximum.accumulate(z) - z).max()) if len(z) else 0.0
+
+
+def main_branches(pts: np.ndarray, lab: np.ndarray, g: Graph, root: int, grid: BoxGrid, tau: float,
                   o: DecomposeOptions, tree: cKDTree | None = None):
     """Algorithm 1 step 1 on the shortest paths (leaf edges ``leaf_edge_cost`` longer) to FPS endpoints,
-    then every main branch smoothed (smooth.py, ours)."""
-    adj = adjacency if o.edge_power == 1.0 else adjacency.power(o.edge_power)
-    _, pred = shortest_paths(weighted(adj, np.where(lab == LEAF, o.leaf_edge_cost, 1.0)), root)
+    then every main branch smoothed (smooth.py, ours).
+
+    A path that falls more than ``HOOK_DROP`` of the height below a point it reached before is routed
+    again with ``graph.shortcuts`` across scan gaps, and the new path replaces it if it falls less.
+    """
+    adj = g.adjacency if o.edge_power == 1.0 else g.adjacency.power(o.edge_power)
+    cost = np.where(lab == LEAF, o.leaf_edge_cost, 1.0)
+    _, pred = shortest_paths(weighted(adj, cost), root)
     ends = farthest_points(pts, o.fps_candidates + 1, root)
-    ends = ends[ends != root][: o.fps_candidates]
-    paths = branch_paths([int(e) for e in ends], pred, pts, grid, o.step)
+    ends = [int(e) for e in ends[ends != root][: o.fps_candidates]]
+    paths = branch_paths(ends, pred, pts, grid, o.step)
+    hooked = [i for i, p in enumerate(paths) if drop(p) > HOOK_DROP * float(np.ptp(pts[:, 2]))]
+    extra = shortcuts(pts, g, o.query_radius) if hooked else None
+    if extra is not None:
+        _, pred2 = shortest_paths(weighted((adj + extra).tocsr(), cost), root)
+        for i, p in zip(hooked, branch_paths([ends[i] for i in hooked], pred2, pts, grid, o.step)):
+            paths[i] = p if drop(p) < drop(paths[i]) else paths[i]
     order = select_mains(paths, o.counts()[0], tau, o.step, o.selection_weight())
     return smooth_branchset(merge_mains(paths, order, tau, o.resample, o.sc_bins), tree)
 
@@ -142,7 +163,7 @@ def decompose(points: np.ndarray, options: DecomposeOptions = DecomposeOptions()
     lab = prep.labels if prep.labels is not None else separate(pts, g.neighbours, o.leaf_dimension)
     clock.lap("separate")
     tree = cKDTree(pts)
-    mains = main_branches(pts, lab, g.adjacency, root, grid, tau, o, tree)
+    mains = main_branches(pts, lab, g, root, grid, tau, o, tree)
     clock.lap("mains")
     bare = bare_trunk(pts, mains) if prep.labels is None else None  # guessed labels: bare trunk is wood
     if bare is not None:

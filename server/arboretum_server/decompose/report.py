@@ -21,7 +21,15 @@ import numpy as np
 
 from arboretum_library.model import LEAF, Level
 
-from .evaluate import connected, crossings, evaluate, lobe_distance, mean_turning, reference_fit
+from .evaluate import (
+    connected,
+    crossings,
+    evaluate,
+    lobe_distance,
+    main_drop,
+    mean_turning,
+    reference_fit,
+)
 from .options import SPECIES_COUNTS, DecomposeOptions
 from .pipeline import decompose
 from .toytree import toy_scan
@@ -57,7 +65,7 @@ def real_figures(scan: Path) -> dict:
     leaf = d.hbl.points[d.labels == LEAF]
     out = {"scan": scan.name, "time_s": round(sum(d.timing.values()), 3), **d.stats,
            "connected": connected(d.hbl), "crossings": crossings(d.hbl),
-           "main_turning": round(mean_turning(d.hbl, Level.MAIN), 4),
+           "main_turning": round(mean_turning(d.hbl, Level.MAIN), 4), "main_drop": round(main_drop(d.hbl), 4),
            "secondary_turning": round(mean_turning(d.hbl, Level.SECONDARY), 4),
            "crown_base": round(lobes_below_crown_base(d.hbl)[0], 3), "lobes_below_crown_base": lobes_below_crown_base(d.hbl)[1],
            "leaf_cover": round(float((lobe_distance(d.hbl, leaf) <= 0.01).mean()), 4) if len(leaf) else None}
