@@ -190,6 +190,27 @@ def test_refinement_operations(leaf_on):
     assert [crossings(x.hbl) for x in (r, i, m, s)] == [0, 0, 0, 0]
 
 
+@pytest.mark.parametrize("rounds", [1, 2])
+def test_rerouted_kept_lobes_keep_their_places(leaf_on, monkeypatch, rounds):
+    # Kept lobes 0 and 2 are made to cross the merged lobe once: they are routed again with it (2 rounds)
+    # or left (1 round: no round left); either way every lobe keeps its place and the merged one is last.
+    d = leaf_on[2]
+    calls = []
+
+    def crossing(lobes, n_kept, tol):
+        calls.append(n_kept)
+        return {0, 2} if len(calls) == 1 else set()
+
+    monkeypatch.setattr(refine, "ROUTE_ROUNDS", rounds)
+    monkeypatch.setattr(refine, "_crossing_new", crossing)
+    m = refine.merge_lobes(d, [5, 6])
+    _check(m, N_L - 1)
+    assert calls == ([N_L - 2] if rounds == 2 else [])  # the last round is not checked again
+    kept = [k for k in range(N_L) if k not in (5, 6)]
+    assert all(np.array_equal(m.lobes[i].members, d.lobes[k].members) for i, k in enumerate(kept))
+    assert len(m.lobes[-1].members) == len(d.lobes[5].members) + len(d.lobes[6].members)
+
+
 def test_insert_lobe_rebuilds_the_lobe_it_takes_from(leaf_on):
     from arboretum_server.decompose.secondary import inside_foreign
 

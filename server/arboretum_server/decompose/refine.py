@@ -23,7 +23,8 @@ from .secondary import boxes, foreign, make_lobes, zones
 from .state import Decomposition, LobeState, build_hbl
 
 ROUTE_ROUNDS = 3
-"""Rounds of routing kept lobes again whose branches run through new lobes (each round adds lobes)."""
+"""Routing rounds of a refinement (``make_lobes`` calls): kept lobes whose branches run through the new
+lobes of one round are routed again, with them, in the next; the last round's result stands."""
 
 
 def _lobe_index(d: Decomposition, j: int) -> int:
@@ -42,13 +43,13 @@ def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], c
     kept, groups, centres = list(kept), list(groups), list(centres)
     slots = list(order) if order is not None else list(range(len(kept) + len(groups)))
     lobes: list[LobeState] = list(kept)
-    for _ in range(ROUTE_ROUNDS):
+    for rnd in range(ROUTE_ROUNDS):
         if not groups:
             break
         zone = zones(d.points, [lb.members for lb in kept] + groups)
         lobes = make_lobes(groups, np.array(centres), d.points, d.adjacency, d.root_index, zone, d.mains,
                            d.grid, d.tau, d.options, tuple(kept))[0]
-        cross = _crossing_new(lobes, len(kept), d.options.step / 2)
+        cross = sorted(_crossing_new(lobes, len(kept), d.options.step / 2)) if rnd + 1 < ROUTE_ROUNDS else []
         if not cross:
             break
         back = [slots[i] for i in range(len(kept)) if i not in cross] + [slots[i] for i in cross]
