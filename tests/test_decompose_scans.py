@@ -28,7 +28,7 @@ def test_leaf_off_scans_give_connected_skeletons(scans_dir, prefix):
     # smoothed branches: the graph paths turned 0.22-0.54 rad per vertex (mains) and 0.33-0.98 (secondaries)
     assert f["main_turning"] < 0.15 and f["secondary_turning"] < 0.2
     # no main branch climbs one limb and comes down to reach another: 06's trunk fell 0.23 of the height
-    # before hooked paths were routed across scan gaps (now 0.013; 01 0.023, 10 0.041)
+    # before hooked paths were routed across scan gaps (now 0.038, a drooping limb; 01 0.023, 10 0.041)
     assert f["main_drop"] <= 0.05
 
 
@@ -131,4 +131,4 @@ def test_refinements_of_a_pine_cross_no_lobe(species, seed, case, allowed):
                           ("merge", merge_lobes(d, [j, k])), ("split", split_lobe(d, j, strokes))):
             if crossings(out.hbl):
                 bad.append((name, j))
-    assert bad == allowed
+    assert set(bad) <= set(allowed), bad

@@ -475,15 +475,20 @@ def _gap_tree(rng):
 
 def test_a_main_branch_jumps_a_scan_gap_instead_of_climbing_down_a_limb(rng, monkeypatch):
     from arboretum_server.decompose import pipeline
-    from arboretum_server.decompose.graph import shortcuts
+    from arboretum_server.decompose.graph import gap_graph
 
     pts, root = _gap_tree(rng)
     g = knn_graph(pts, 5, 0.05)
     assert g.components == 2 and g.bridges == 1
-    extra = shortcuts(pts, g, 0.05).tocoo()
-    length = np.linalg.norm(pts[extra.row] - pts[extra.col], axis=1)
-    assert np.allclose(extra.data, 10 * length) and length.max() <= 0.15 + 1e-9
-    foot = (pts[extra.col, 2] < 0.3) & (np.abs(pts[extra.col, 0]) < 0.005) & (pts[extra.row, 2] < 0.25)
+    gaps = gap_graph(pts, g, 0.05)
+    e = gaps.tocoo()
+    length = np.linalg.norm(pts[e.row] - pts[e.col], axis=1)
+    across = g.component[e.row] != g.component[e.col]
+    assert np.allclose(e.data[across], 10 * length[across]) and length[across].max() <= 0.15 + 1e-9
+    wood = g.adjacency.toarray()
+    assert np.array_equal(e.data[~across], wood[e.row[~across], e.col[~across]])  # wood edges unchanged
+    assert across.sum() > 2  # more than the one bridge (both directions)
+    foot = across & (pts[e.col, 2] < 0.3) & (np.abs(pts[e.col, 0]) < 0.005) & (pts[e.row, 2] < 0.25)
     assert foot.any()  # across the gap: the stem's foot to the trunk's top or the limb's base, 6-7 cm
 
     def top_path(hook_drop):

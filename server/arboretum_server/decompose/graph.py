@@ -17,9 +17,9 @@ from scipy.spatial import cKDTree
 CANDIDATES = 16
 """Neighbours queried per point for bridging candidates (beyond the K graph neighbours)."""
 SHORTCUT_REACH = 3.0
-"""``shortcuts``: components whose boxes come within this many query radii of each other are joined."""
+"""``gap_graph``: components whose boxes come within this many query radii of each other are joined."""
 SHORTCUT_COST = 10.0
-"""``shortcuts``: a shortcut costs this many times its length (real wood is always preferred)."""
+"""``gap_graph``: an edge across a scan gap costs this many times its length (wood is preferred)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -62,40 +62,46 @@ def knn_graph(points: np.ndarray, k: int, radius: float) -> Graph:
     return Graph(adj, ncomp, len(a), nb[:, 1:], lab)
 
 
-def shortcuts(points: np.ndarray, g: Graph, radius: float) -> csr_matrix | None:
-    """Extra edges (N, N) for ``g``: between every two components (before bridging) whose boxes lie
-    within ``SHORTCUT_REACH`` x ``radius``, an edge from each point of the smaller one to its nearest
-    point of the other within that reach, weighted ``SHORTCUT_COST`` x its length; None for a graph of
-    one component or when no two components come that close.
+def gap_graph(points: np.ndarray, g: Graph, radius: float) -> csr_matrix | None:
+    """``g``'s adjacency (N, N) with every edge across a scan gap ``SHORTCUT_COST`` times its length:
+    the bridges, and, between every two components (before bridging) whose boxes lie within
+    ``SHORTCUT_REACH`` x ``radius``, an edge from each point of the smaller one to its nearest point of
+    the other within that reach. None for a graph of one component.
 
     The bridges of ``knn_graph`` join each component by its globally shortest edges, which can hang a
     trunk's upper part off a neighbouring limb where a scan gap cuts it from the fork below: the path to
-    the top then climbs the limb and comes back down (scan 06). With these edges Dijkstra can jump the
-    gap instead when that saves more than the penalty. ``pipeline.main_branches`` uses them only for
-    paths that turn down and up again like that.
+    the top then climbs the limb and comes back down (scan 06). On this graph every gap costs the same
+    per metre, so Dijkstra jumps the gap that saves the most path. ``pipeline.main_branches`` uses it
+    only for paths that turn down and up again like that.
     """
     if g.component is None:
         return None
     lab = g.component
+    coo = g.adjacency.tocoo()
+    across = lab[coo.row] != lab[coo.col]
+    w = np.where(across, SHORTCUT_COST * coo.data, coo.data)
+    base = csr_matrix((w, (coo.row, coo.col)), shape=g.adjacency.shape)
     groups = np.split(np.argsort(lab, kind="stable"), np.cumsum(np.bincount(lab))[:-1])
     lo = np.array([points[ix].min(axis=0) for ix in groups])
     hi = np.array([points[ix].max(axis=0) for ix in groups])
     reach = SHORTCUT_REACH * radius
     near = ((lo[:, None] - reach <= hi[None]) & (lo[None] - reach <= hi[:, None])).all(axis=2)
     trees: dict[int, cKDTree] = {}
-    a, b, w = [], [], []
+    a, b, d = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)], [np.zeros(0)]
     for i, j in zip(*np.nonzero(np.triu(near, 1))):
         small, big = (i, j) if len(groups[i]) <= len(groups[j]) else (j, i)
         if big not in trees:
             trees[big] = cKDTree(points[groups[big]])
-        d, k = trees[big].query(points[groups[small]], distance_upper_bound=reach)
-        ok = np.isfinite(d)
+        dist, k = trees[big].query(points[groups[small]], distance_upper_bound=reach)
+        ok = np.isfinite(dist)
         a.append(groups[small][ok])
         b.append(groups[big][k[ok]])
-        w.append(SHORTCUT_COST * np.maximum(d[ok], 1e-12))
-    if not a or not sum(len(x) for x in a):
-        return None
-    return _edges(np.concatenate(a), np.concatenate(b), np.concatenate(w), len(points))
+        d.append(dist[ok])
+    extra = _edges(np.concatenate(a), np.concatenate(b), SHORTCUT_COST * np.maximum(np.concatenate(d), 1e-12),
+                   len(points))
+    extra = (extra - extra.multiply(base != 0)).tocsr()  # an edge the graph has keeps its weight
+    extra.eliminate_zeros()
+    return (base + extra).tocsr()
 
 
 def _bridges(points, tree, lab, ncomp, dist, nb):

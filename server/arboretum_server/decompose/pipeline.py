@@ -18,7 +18,7 @@ from scipy.spatial import cKDTree
 from arboretum_library.model import LEAF, WOOD
 from arboretum_library.progress import ProgressFn, no_progress
 
-from .graph import Graph, knn_graph, shortcuts, shortest_paths, weighted
+from .graph import Graph, gap_graph, knn_graph, shortest_paths, weighted
 from .grid import BoxGrid
 from .lobes import kmeans
 from .merge import merge_mains, select_mains
@@ -124,7 +124,8 @@ def main_branches(pts: np.ndarray, lab: np.ndarray, g: Graph, root: int, grid: B
     then every main branch smoothed (smooth.py, ours).
 
     A path that falls more than ``HOOK_DROP`` of the height below a point it reached before is routed
-    again with ``graph.shortcuts`` across scan gaps, and the new path replaces it if it falls less.
+    again on ``graph.gap_graph`` (every scan gap costs the same per metre), and the new path replaces
+    it if it falls less.
     """
     adj = g.adjacency if o.edge_power == 1.0 else g.adjacency.power(o.edge_power)
     cost = np.where(lab == LEAF, o.leaf_edge_cost, 1.0)
@@ -133,9 +134,9 @@ def main_branches(pts: np.ndarray, lab: np.ndarray, g: Graph, root: int, grid: B
     ends = [int(e) for e in ends[ends != root][: o.fps_candidates]]
     paths = branch_paths(ends, pred, pts, grid, o.step)
     hooked = [i for i, p in enumerate(paths) if drop(p) > HOOK_DROP * float(np.ptp(pts[:, 2]))]
-    extra = shortcuts(pts, g, o.query_radius) if hooked else None
-    if extra is not None:
-        _, pred2 = shortest_paths(weighted((adj + extra).tocsr(), cost), root)
+    gaps = gap_graph(pts, g, o.query_radius) if hooked else None
+    if gaps is not None:
+        _, pred2 = shortest_paths(weighted(gaps if o.edge_power == 1.0 else gaps.power(o.edge_power), cost), root)
         for i, p in zip(hooked, branch_paths([ends[i] for i in hooked], pred2, pts, grid, o.step)):
             paths[i] = p if drop(p) < drop(paths[i]) else paths[i]
     order = select_mains(paths, o.counts()[0], tau, o.step, o.selection_weight())
