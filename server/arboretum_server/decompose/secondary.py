@@ -170,6 +170,8 @@ def unwrap(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, ra
     same blockers every time, so carving a lobe again gives the same shape. A lobe whose carved shape is
     not a closed one-piece surface is kept.
     """
+    if not mains.segments:
+        return 0
     verts = _main_vertices(mains)[0]
     near_pts = verts[np.argsort(np.linalg.norm(verts - lobes[j].centre, axis=1))[:near]]
     wood = np.concatenate([resample_step(seg, step) for seg in mains.segments])
@@ -213,14 +215,16 @@ def part_overlaps(lobes: list[LobeState], start: int, mains: BranchSet, pts: np.
     when the blockers split the shape; then the lobe's centre moves to its own point nearest the old
     centre outside every other lobe (its branch ends there), when it has one.
     """
-    wood = np.concatenate([resample_step(seg, step) for seg in mains.segments])
+    wood = [resample_step(seg, step) for seg in mains.segments]
+    wood = np.concatenate(wood) if wood else np.zeros((0, 3))
     changed = 0
     for j in range(start, len(lobes)):
         c = lobes[j].centre[None]
-        for k in range(len(lobes)):
+        lo, hi = boxes(lobes)
+        for k in np.flatnonzero(((c > lo) & (c < hi)).all(axis=1)):
             if k == j or not (winding_numbers(lobes[k].hull_vertices, lobes[k].hull_faces, c) > 0.5).any():
                 continue
-            changed += _carve(lobes, k, pts, np.concatenate([pts[lobes[j].members], wood]), radius)
+            changed += _carve(lobes, int(k), pts, np.concatenate([pts[lobes[j].members], wood]), radius)
         if inside_foreign(lobes, j, c)[0]:
             own = pts[lobes[j].members]
             free = own[~inside_foreign(lobes, j, own)]
@@ -271,8 +275,9 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
 
     ``others`` are lobes kept from before (zone ids 0..len(others)-1; the new lobes follow them).
     Returns every lobe (``others`` first, then the new ones; any of them may come back with the main
-    branches carved out, see ``unwrap``), the routing predecessors (N,) and the number of branches
-    routed again.
+    branches carved out, see ``unwrap``, or carved round a new lobe whose centre it buried, see
+    ``part_overlaps``, which may instead move that new lobe's centre onto one of its own points), the
+    routing predecessors (N,) and the number of branches routed again.
     """
     lobes = list(others)
     for g, c in zip(groups, centres):

@@ -166,7 +166,7 @@ def _reassign_all(st: _State, att: Attraction, sep: float, reach: float) -> None
     st.best_node[live[ok]] = cand[k[ok]]
 
 
-def _pull(st: _State, att: Attraction) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _pull(st: _State, att: Attraction) -> tuple[np.ndarray, ...]:
     """Active nodes (K,), their V_att sums (K, 3) (nearest-node sets, and whole lobes for buds inside
     their hull) and aims (K, 3): for nodes outside their hull the nearest live point of their lobe,
     NaN for the others.
