@@ -512,3 +512,26 @@ def test_main_drop_measures_the_deepest_fall_below_the_running_top():
     hbl = HBL(np.zeros(3), (Branch(up, np.full(5, 0.01), -1, -1, Level.MAIN),
                             Branch(hook, np.full(4, 0.01), 0, 1, Level.MAIN)), ())
     assert np.isclose(main_drop(hbl), 0.3 / hbl.height)
+
+
+def test_a_new_lobe_gives_way_to_a_kept_branch_through_it(rng):
+    # Refinement: a merged (new) lobe swallows a kept lobe's secondary branch. Carving the branch out of
+    # the new lobe clears it without routing the kept branch again, and the new lobe does not grow.
+    from arboretum_server.decompose.merge import resample_step
+    from arboretum_server.decompose.refine import _crossing_new, _give_way
+    from arboretum_server.decompose.state import LobeState
+
+    blob = np.array([0.1, 0.0, 0.3]) + rng.normal(0, [0.03, 0.03, 0.02], (400, 3))
+    far = np.array([0.3, 0.0, 0.3]) + rng.normal(0, 0.01, (60, 3))
+    pts = np.vstack([far, blob])
+    seg = resample_step(np.array([[0.0, 0.0, 0.3], far.mean(axis=0)]), 0.01)  # from the trunk through the blob
+    vf, ff, _ = lobe_hull(far, 1 / 13)
+    vb, fb, _ = lobe_hull(blob, 1 / 13)
+    lobes = [LobeState(np.arange(60), far.mean(axis=0), vf, ff, True, seg, 0, 0),
+             LobeState(np.arange(60, 460), blob.mean(axis=0), vb, fb, True, np.zeros((2, 3)), 0, 0)]
+    assert _crossing_new(lobes, 1, 0.005) == {0}
+    _give_way(lobes, 1, [0], pts, 1 / 13)
+    assert _crossing_new(lobes, 1, 0.005) == set() and lobes[0].segment is seg
+    q = rng.uniform(blob.min(axis=0), blob.max(axis=0), (800, 3))
+    now = winding_numbers(lobes[1].hull_vertices, lobes[1].hull_faces, q) > 0.5
+    assert now.any() and not (now & (winding_numbers(vb, fb, q) <= 0.5)).any()

@@ -3,8 +3,8 @@ split lobes. Each is a pure function ``Decomposition -> Decomposition`` that red
 hulls and secondary branches of the lobes it creates (one Dijkstra on the cached graph, Algorithm 1
 step 2 against the cached main branches; a kept lobe wrapped round the main branch where a new branch
 must start is carved, ``secondary.unwrap``), then the radii and records. A lobe that loses points to
-``insert_lobe`` is rebuilt like a new one (centre, hull, branch), and a kept lobe whose branch would run
-through a new lobe is routed again with them. Lobes keep their order; new ones come last (a lobe that
+``insert_lobe`` is rebuilt like a new one (centre, hull, branch). A kept lobe's branch that would run
+through a new lobe is carved out of it (``_give_way``), or, when that fails, routed again with them. Lobes keep their order; new ones come last (a lobe that
 loses all its points is dropped). Point indices refer to
 ``Decomposition.points``; strokes are in the HBL's output frame.
 """
@@ -18,8 +18,9 @@ import numpy as np
 
 from arboretum_library.errors import InputError
 
-from .lobes import kmeans
-from .secondary import boxes, foreign, make_lobes, zones
+from .lobes import kmeans, winding_numbers
+from .merge import resample_step
+from .secondary import boxes, carve_lobe, foreign, make_lobes, zones
 from .state import Decomposition, LobeState, build_hbl
 
 ROUTE_ROUNDS = 3
@@ -37,7 +38,8 @@ def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], c
             t0: float, op: str, order: list[int] | None = None) -> Decomposition:
     """Route the new lobes over ``groups`` after ``kept`` and rebuild the records.
 
-    A kept lobe whose secondary branch would run through a new lobe is routed again with them.
+    A kept lobe whose secondary branch would run through a new lobe is carved out of it, else routed
+    again with them.
     ``order`` (one slot per kept lobe and group, in that order) gives each lobe's place in the result.
     """
     kept, groups, centres = list(kept), list(groups), list(centres)
@@ -50,6 +52,9 @@ def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], c
         lobes = make_lobes(groups, np.array(centres), d.points, d.adjacency, d.root_index, zone, d.mains,
                            d.grid, d.tau, d.options, tuple(kept))[0]
         cross = sorted(_crossing_new(lobes, len(kept), d.options.step / 2)) if rnd + 1 < ROUTE_ROUNDS else []
+        if cross:  # the new lobes give way to the branches already there, if carving lets them
+            _give_way(lobes, len(kept), cross, d.points, d.options.alpha_radius)
+            cross = sorted(_crossing_new(lobes, len(kept), d.options.step / 2))
         if not cross:
             break
         back = [slots[i] for i in range(len(kept)) if i not in cross] + [slots[i] for i in cross]
@@ -65,6 +70,19 @@ def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], c
     out = replace(d, lobes=tuple(lobes), lobe_of=lobe_of, stats=stats,
                   timing=dict(d.timing, **{op: time.perf_counter() - t0}))
     return replace(out, hbl=build_hbl(out))
+
+
+def _give_way(lobes: list[LobeState], n_kept: int, cross: list[int], pts: np.ndarray, radius: float,
+              step: float = 0.0025) -> None:
+    """Carve the kept branches of ``cross`` out of the new lobes (indices >= ``n_kept``) they enter (in
+    place): rebuilding a new lobe's hull is cheaper than routing a kept branch round it again, and the
+    tree the user already has keeps its branches."""
+    wood = np.concatenate([resample_step(lobes[i].segment, step) for i in cross])
+    for k in range(n_kept, len(lobes)):
+        lo, hi = lobes[k].hull_vertices.min(axis=0), lobes[k].hull_vertices.max(axis=0)
+        near = wood[((wood > lo) & (wood < hi)).all(axis=1)]
+        if len(near) and (winding_numbers(lobes[k].hull_vertices, lobes[k].hull_faces, near) > 0.5).any():
+            carve_lobe(lobes, k, pts, wood, radius)
 
 
 def _crossing_new(lobes: list[LobeState], n_kept: int, tol: float) -> set[int]:

@@ -184,12 +184,12 @@ def unwrap(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, ra
         c = near_pts[((near_pts > lo) & (near_pts < hi)).all(axis=1)]
         if not len(c) or not (winding_numbers(lb.hull_vertices, lb.hull_faces, c) > 0.5).any():
             continue
-        if _carve(lobes, k, pts, wood, radius):
+        if carve_lobe(lobes, k, pts, wood, radius):
             changed += 1
     return changed
 
 
-def _carve(lobes: list[LobeState], k: int, pts: np.ndarray, blockers: np.ndarray, radius: float) -> bool:
+def carve_lobe(lobes: list[LobeState], k: int, pts: np.ndarray, blockers: np.ndarray, radius: float) -> bool:
     """Rebuild lobe ``k``'s hull with the ``blockers`` (B, 3) within one probe radius of its points kept
     out, at most at its plain probe radius (in place); False when the carved shape is not usable."""
     lb = lobes[k]
@@ -224,7 +224,7 @@ def part_overlaps(lobes: list[LobeState], start: int, mains: BranchSet, pts: np.
         for k in np.flatnonzero(((c > lo) & (c < hi)).all(axis=1)):
             if k == j or not (winding_numbers(lobes[k].hull_vertices, lobes[k].hull_faces, c) > 0.5).any():
                 continue
-            changed += _carve(lobes, int(k), pts, np.concatenate([pts[lobes[j].members], wood]), radius)
+            changed += carve_lobe(lobes, int(k), pts, np.concatenate([pts[lobes[j].members], wood]), radius)
         if inside_foreign(lobes, j, c)[0]:
             own = pts[lobes[j].members]
             free = own[~inside_foreign(lobes, j, own)]
