@@ -4,9 +4,9 @@ hulls and secondary branches of the lobes it creates (one Dijkstra on the cached
 step 2 against the cached main branches; a kept lobe wrapped round the main branch where a new branch
 must start is carved, ``secondary.unwrap``), then the radii and records. A lobe that loses points to
 ``insert_lobe`` is rebuilt like a new one (centre, hull, branch). A kept lobe's branch that would run
-through a new lobe is carved out of it (``_give_way``), or, when that fails, routed again with them. Lobes keep their order; new ones come last (a lobe that
-loses all its points is dropped). Point indices refer to
-``Decomposition.points``; strokes are in the HBL's output frame.
+through a new lobe is carved out of it (``_give_way``), or, when that fails, routed again with them.
+Lobes keep their order; new ones come last (a lobe that loses all its points is dropped). Point indices
+refer to ``Decomposition.points``; strokes are in the HBL's output frame.
 """
 
 from __future__ import annotations
