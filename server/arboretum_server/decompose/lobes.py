@@ -176,11 +176,18 @@ def lobe_hull(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray
     edge leave it with four faces) or fall apart into islands; growing the probe radius through
     ``RADIUS_STEPS`` usually fills such gaps before the convex hull is needed.
     """
-    shape = carved_hull(points, radius, None)
-    if shape is not None:
-        return shape[0], shape[1], True
+    return plain_hull(points, radius)[:3]
+
+
+def plain_hull(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray, bool, tuple[float, ...]]:
+    """``lobe_hull`` and the ``RADIUS_STEPS`` up to the one it used (all of them for a convex hull):
+    what ``plain_steps`` would compute again."""
+    for i, step in enumerate(RADIUS_STEPS):
+        shape = alpha_shape(points, radius * step)
+        if shape is not None and is_closed_manifold(shape[1]):
+            return shape[0], shape[1], True, RADIUS_STEPS[: i + 1]
     v, f = convex_hull(points)
-    return v, f, False
+    return v, f, False, RADIUS_STEPS
 
 
 def carved_hull(points: np.ndarray, radius: float, blockers: np.ndarray | None,

@@ -28,7 +28,7 @@ from scipy.spatial import cKDTree
 
 from .graph import path_to, shortest_paths, weighted
 from .grid import BoxGrid
-from .lobes import RADIUS_STEPS, carved_hull, lobe_hull, plain_steps, winding_numbers
+from .lobes import RADIUS_STEPS, carved_hull, plain_hull, plain_steps, winding_numbers
 from .merge import BranchSet, centre_paths, merge_secondaries, resample_step
 from .options import DecomposeOptions
 from .smooth import smooth_polylines, vertex_limits
@@ -207,7 +207,7 @@ def carve_lobe(lobes: list[LobeState], k: int, pts: np.ndarray, blockers: np.nda
     members = pts[lb.members]
     lo, hi = members.min(axis=0) - radius, members.max(axis=0) + radius
     near = blockers[((blockers > lo) & (blockers < hi)).all(axis=1)]
-    steps = plain_steps(members, radius) if lb.alpha else RADIUS_STEPS
+    steps = lb.steps if lb.steps is not None else plain_steps(members, radius) if lb.alpha else RADIUS_STEPS
     shape = carved_hull(members, radius, near, steps)
     if shape is None:
         return False
@@ -292,8 +292,9 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
     """
     lobes = list(others)
     for g, c in zip(groups, centres):
-        verts, faces, used_alpha = lobe_hull(pts[g], o.alpha_radius)
-        lobes.append(LobeState(g, np.asarray(c, np.float64), verts, faces, used_alpha, np.zeros((0, 3)), -1, -1))
+        verts, faces, used_alpha, steps = plain_hull(pts[g], o.alpha_radius)
+        lobes.append(LobeState(g, np.asarray(c, np.float64), verts, faces, used_alpha, np.zeros((0, 3)), -1, -1,
+                               steps))
     part_overlaps(lobes, len(others), mains, pts, o.alpha_radius)
     centres = [lb.centre for lb in lobes[len(others):]]
     _, pred = shortest_paths(weighted(adjacency, np.where(zone >= 0, ZONE_COST, 1.0)), root)
@@ -325,5 +326,5 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
             if fallback is None:
                 fallback, box = _unwrapped_fallback(lobes, j, mains, pts, o.alpha_radius, box)
             seg, parent, pv = fallback or (smoothed, parent, pv)
-        lobes[j] = LobeState(lb.members, lb.centre, lb.hull_vertices, lb.hull_faces, lb.alpha, seg, parent, pv)
+        lobes[j] = replace(lb, segment=seg, parent=parent, parent_vertex=pv)
     return lobes, pred, rerouted

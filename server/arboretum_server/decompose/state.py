@@ -35,6 +35,9 @@ class LobeState:
     """Index of the main branch it connects to."""
     parent_vertex: int
     """Vertex of that main branch where it connects."""
+    steps: tuple[float, ...] | None = None
+    """The ``lobes.RADIUS_STEPS`` up to the one its plain hull used (``lobes.plain_steps``), when known:
+    carving within them never grows the hull. None: computed again when needed."""
 
 
 @dataclass(frozen=True, eq=False)
