@@ -25,7 +25,8 @@ from .state import Decomposition, LobeState, build_hbl
 
 ROUTE_ROUNDS = 3
 """Routing rounds of a refinement (``make_lobes`` calls): kept lobes whose branches run through the new
-lobes of one round are routed again, with them, in the next; the last round's result stands."""
+lobes of one round are rebuilt and routed again in the next, among everything else built so far; the
+last round's result stands."""
 
 
 def _lobe_index(d: Decomposition, j: int) -> int:
@@ -57,11 +58,12 @@ def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], c
             cross = sorted(_crossing_new(lobes, len(kept), d.options.step / 2))
         if not cross:
             break
-        back = [slots[i] for i in range(len(kept)) if i not in cross] + [slots[i] for i in cross]
-        slots = back + slots[len(kept):]
-        groups = [kept[i].members for i in cross] + groups
-        centres = [kept[i].centre for i in cross] + centres
-        kept = [lb for i, lb in enumerate(kept) if i not in cross]
+        # next round: this round's lobes stay, the crossing kept lobes are rebuilt and routed again
+        n = len(kept)
+        slots = [slots[i] for i in range(n) if i not in cross] + slots[n:] + [slots[i] for i in cross]
+        groups = [lobes[i].members for i in cross]
+        centres = [lobes[i].centre for i in cross]
+        kept = [lb for i, lb in enumerate(lobes) if i >= n or i not in cross]
     lobes = [lb for _, lb in sorted(zip(slots, lobes), key=lambda t: t[0])]
     lobe_of = np.full(len(d.points), -1, np.int32)
     for j, lb in enumerate(lobes):
