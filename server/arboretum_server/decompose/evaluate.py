@@ -35,7 +35,7 @@ from scipy.spatial import cKDTree
 from arboretum_library.model import HBL, Level
 from arboretum_library.truth import TreeTruth, branch_polylines, polyline_length
 
-from .merge import resample_step
+from .merge import drop, resample_step, sample_polylines
 
 COVER_TOL = 0.01
 """Leaf cover tolerance at the 0.8 m scale."""
@@ -65,11 +65,6 @@ class Metrics:
 
     def as_dict(self) -> dict:
         return asdict(self)
-
-
-def sample_polylines(polylines: list[np.ndarray], step: float) -> np.ndarray:
-    """Points (M, 3) every ~``step`` along each polyline (N_i, 3)."""
-    return np.concatenate([resample_step(p, step) for p in polylines]) if polylines else np.zeros((0, 3))
 
 
 def signed_distances(vertices: np.ndarray, faces: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -121,11 +116,8 @@ def mean_turning(hbl: HBL, level: Level) -> float:
 
 def main_drop(hbl: HBL) -> float:
     """The largest fall of a main branch below its running highest point, / height (``main_drop``)."""
-    worst = 0.0
-    for i in hbl.by_level(Level.MAIN):
-        z = hbl.branches[i].points[:, 2]
-        worst = max(worst, float((np.maximum.accumulate(z) - z).max()))
-    return worst / max(hbl.height, 1e-12)
+    falls = [drop(hbl.branches[i].points) for i in hbl.by_level(Level.MAIN)]
+    return max(falls, default=0.0) / max(hbl.height, 1e-12)
 
 
 def connected(hbl: HBL) -> bool:

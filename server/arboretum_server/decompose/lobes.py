@@ -209,11 +209,7 @@ def carved_hull(points: np.ndarray, radius: float, blockers: np.ndarray | None,
 def plain_steps(points: np.ndarray, radius: float) -> tuple[float, ...]:
     """The ``RADIUS_STEPS`` up to the one ``lobe_hull`` used for ``points`` (all of them for a convex hull,
     which holds every alpha shape): carving within these never grows the hull."""
-    for i, step in enumerate(RADIUS_STEPS):
-        shape = alpha_shape(points, radius * step)
-        if shape is not None and is_closed_manifold(shape[1]):
-            return RADIUS_STEPS[: i + 1]
-    return RADIUS_STEPS
+    return plain_hull(points, radius)[3]
 
 
 def winding_numbers(vertices: np.ndarray, faces: np.ndarray, q: np.ndarray) -> np.ndarray:

@@ -34,6 +34,17 @@ def resample_step(points: np.ndarray, step: float) -> np.ndarray:
     return np.stack([np.interp(t, s, points[:, k]) for k in range(3)], axis=1)
 
 
+def sample_polylines(polylines: list[np.ndarray], step: float) -> np.ndarray:
+    """Points (M, 3) every ~``step`` along each polyline (N_i, 3)."""
+    return np.concatenate([resample_step(p, step) for p in polylines]) if polylines else np.zeros((0, 3))
+
+
+def drop(path: np.ndarray) -> float:
+    """How far ``path`` (L, 3) falls below the highest point it reached before (0 if it never turns down)."""
+    z = path[:, 2]
+    return float((np.maximum.accumulate(z) - z).max()) if len(z) else 0.0
+
+
 def centre_paths(paths: list[np.ndarray], grid: BoxGrid) -> list[np.ndarray]:
     """Each vertex of each path moved to the centroid of the cloud around it in ``grid`` (root kept)."""
     if not paths:

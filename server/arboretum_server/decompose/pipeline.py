@@ -21,7 +21,7 @@ from arboretum_library.progress import ProgressFn, no_progress
 from .graph import Graph, gap_graph, knn_graph, shortest_paths, weighted
 from .grid import BoxGrid
 from .lobes import kmeans
-from .merge import merge_mains, select_mains
+from .merge import drop, merge_mains, select_mains
 from .options import DecomposeOptions
 from .preprocess import prepare
 from .radii import trunk_radius
@@ -110,12 +110,6 @@ def foliage_points(labels: np.ndarray, pts: np.ndarray, off_main: np.ndarray, o:
 def centre_grid(pts: np.ndarray, r_trunk: float) -> BoxGrid:
     """The grid whose 3x3x3 boxes (+-max(CENTRE_RADIUS, 1.5 r_trunk)) centre branch vertices."""
     return BoxGrid(pts, max(CENTRE_RADIUS, 1.5 * r_trunk) / 1.5)
-
-
-def drop(path: np.ndarray) -> float:
-    """How far ``path`` (L, 3) falls below the highest point it reached before (0 if it never turns down)."""
-    z = path[:, 2]
-    return float((np.maximum.accumulate(z) - z).max()) if len(z) else 0.0
 
 
 def main_branches(pts: np.ndarray, lab: np.ndarray, g: Graph, root: int, grid: BoxGrid, tau: float,

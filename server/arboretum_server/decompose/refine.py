@@ -19,7 +19,7 @@ import numpy as np
 from arboretum_library.errors import InputError
 
 from .lobes import kmeans, winding_numbers
-from .merge import resample_step
+from .merge import sample_polylines
 from .secondary import boxes, carve_lobe, foreign, make_lobes, zones
 from .state import Decomposition, LobeState, build_hbl
 
@@ -79,7 +79,7 @@ def _give_way(lobes: list[LobeState], n_kept: int, cross: list[int], pts: np.nda
     """Carve the kept branches of ``cross`` out of the new lobes (indices >= ``n_kept``) they enter (in
     place): rebuilding a new lobe's hull is cheaper than routing a kept branch round it again, and the
     tree the user already has keeps its branches."""
-    wood = np.concatenate([resample_step(lobes[i].segment, step) for i in cross])
+    wood = sample_polylines([lobes[i].segment for i in cross], step)
     for k in range(n_kept, len(lobes)):
         lo, hi = lobes[k].hull_vertices.min(axis=0), lobes[k].hull_vertices.max(axis=0)
         near = wood[((wood > lo) & (wood < hi)).all(axis=1)]

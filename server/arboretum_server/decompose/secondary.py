@@ -29,7 +29,7 @@ from scipy.spatial import cKDTree
 from .graph import path_to, shortest_paths, weighted
 from .grid import BoxGrid
 from .lobes import RADIUS_STEPS, carved_hull, plain_hull, plain_steps, winding_numbers
-from .merge import BranchSet, centre_paths, merge_secondaries, resample_step
+from .merge import BranchSet, centre_paths, merge_secondaries, resample_step, sample_polylines
 from .options import DecomposeOptions
 from .smooth import smooth_polylines, vertex_limits
 from .state import LobeState
@@ -185,7 +185,7 @@ def unwrap(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, ra
         return 0
     verts = _main_vertices(mains)[0]
     near_pts = verts[np.argsort(np.linalg.norm(verts - lobes[j].centre, axis=1))[:near]]
-    wood = np.concatenate([resample_step(seg, step) for seg in mains.segments])
+    wood = sample_polylines(mains.segments, step)
     changed = 0
     for k in range(len(lobes)):
         lb = lobes[k]
@@ -226,8 +226,7 @@ def part_overlaps(lobes: list[LobeState], start: int, mains: BranchSet, pts: np.
     when the blockers split the shape; then the lobe's centre moves to its own point nearest the old
     centre outside every other lobe (its branch ends there), when it has one.
     """
-    wood = [resample_step(seg, step) for seg in mains.segments]
-    wood = np.concatenate(wood) if wood else np.zeros((0, 3))
+    wood = sample_polylines(mains.segments, step)
     changed = 0
     for j in range(start, len(lobes)):
         c = lobes[j].centre[None]
