@@ -252,6 +252,22 @@ def test_compiled_winding_numbers_equal_the_numpy_formula(rng):
     assert ((fast > 0.5) == (ref > 0.5)).all() and 0 < (fast > 0.5).sum() < len(q)
 
 
+def test_ray_crossing_inside_test_agrees_with_winding_numbers(rng):
+    from arboretum_server.decompose.lobes import convex_hull, inside
+
+    for n in (40, 200, 600):  # alpha shapes (not convex) and convex hulls
+        v, f, _ = lobe_hull(rng.normal(0, 0.03, (n, 3)) * rng.uniform(0.3, 2.0, 3), 1 / 13)
+        q = rng.normal(0, 0.05, (2000, 3))
+        ref = winding_numbers(v, f, q) > 0.5
+        assert (inside(v, f, q) == ref).all() and 100 < ref.sum() < 1900
+    # a unit box whose rays meet its edges and vertices exactly: each counted once
+    v, f = convex_hull(np.array(np.meshgrid([0.0, 1.0], [0.0, 1.0], [0.0, 1.0])).reshape(3, -1).T)
+    g = np.array(np.meshgrid(*[np.linspace(-0.5, 1.5, 9)] * 3)).reshape(3, -1).T
+    strict_in, strict_out = ((g > 0) & (g < 1)).all(axis=1), ((g < 0) | (g > 1)).any(axis=1)
+    got = inside(v, f, g)
+    assert got[strict_in].all() and not got[strict_out].any() and strict_in.sum() == 27
+
+
 def _box_lobe(lo, hi, pts_index, pts):
     from arboretum_server.decompose.lobes import convex_hull
     from arboretum_server.decompose.state import LobeState

@@ -53,6 +53,54 @@ def _circumradii(p: np.ndarray) -> np.ndarray:
     return r
 
 
+class Tetrahedra:
+    """The Delaunay tetrahedralisation of a cluster (and its blockers) with every circumradius and
+    neighbour: built once, cut at as many probe radii as ``plain_hull`` and ``carved_hull`` try."""
+
+    def __init__(self, points: np.ndarray, blockers: np.ndarray | None = None):
+        self.n_own = len(points)
+        self.carve = blockers is not None and len(blockers) > 0
+        self.points = np.vstack([points, blockers]) if self.carve else points
+        self.tets = np.zeros((0, 4), np.int32)
+        self.neighbours = np.zeros((0, 4), np.int32)
+        self.radii = np.zeros(0)
+        if self.n_own < 5:
+            return
+        try:
+            dt = Delaunay(self.points)
+        except QhullError:
+            return
+        self.tets, self.neighbours = dt.simplices, dt.neighbors
+        self.radii = np.full(len(self.tets), np.inf)
+        own = (self.tets < self.n_own).all(axis=1)
+        self.radii[own] = _circumradii(self.points[self.tets[own]])
+
+    def shape(self, radius: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """The alpha shape at probe radius ``radius``, as ``alpha_shape`` returns it."""
+        keep = self.radii < radius
+        if not keep.any():
+            return None
+        faces, opp = _boundary(self.tets, self.neighbours, keep)
+        for _ in range(PINCH_ROUNDS if self.carve else 0):
+            pinched = _pinched_edges(faces)
+            if not len(pinched):
+                break
+            keep[keep] = ~_has_edge(self.tets[keep], pinched)
+            if not keep.any():
+                break
+            faces, opp = _boundary(self.tets, self.neighbours, keep)
+        used = np.zeros(len(self.points), bool)
+        used[self.tets[keep].ravel()] = True
+        if not keep.any() or used.sum() < MIN_COVER * self.n_own:
+            return None
+        points = self.points
+        f = points[faces]
+        n = np.cross(f[:, 1] - f[:, 0], f[:, 2] - f[:, 0])
+        flip = ((points[opp] - f[:, 0]) * n).sum(axis=1) > 0
+        faces[flip] = faces[flip][:, [0, 2, 1]]
+        return _compact(points, faces)
+
+
 def alpha_shape(points: np.ndarray, radius: float,
                 blockers: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray] | None:
     """Closed alpha shape (vertices (V, 3), outward faces (F, 3) int32) of ``points``, or None.
@@ -62,45 +110,20 @@ def alpha_shape(points: np.ndarray, radius: float,
     this cuts often pinches the boundary (two tetrahedra meeting only along an edge); the tetrahedra at
     pinched edges are dropped too, for up to ``PINCH_ROUNDS`` rounds.
     """
-    if len(points) < 5:
-        return None
-    n_own = len(points)
-    carve = blockers is not None and len(blockers) > 0
-    if carve:
-        points = np.vstack([points, blockers])
-    try:
-        dt = Delaunay(points)
-    except QhullError:
-        return None
-    tets = dt.simplices
-    keep = (_circumradii(points[tets]) < radius) & (tets < n_own).all(axis=1)
-    tets = tets[keep]
-    faces, opp = _boundary(tets, len(points))
-    for _ in range(PINCH_ROUNDS if carve else 0):
-        pinched = _pinched_edges(faces)
-        if not len(pinched) or not len(tets):
-            break
-        tets = tets[~_has_edge(tets, pinched)]
-        faces, opp = _boundary(tets, len(points))
-    if not len(tets) or len(np.unique(tets)) < MIN_COVER * n_own:
-        return None
-    f = points[faces]
-    n = np.cross(f[:, 1] - f[:, 0], f[:, 2] - f[:, 0])
-    flip = ((points[opp] - f[:, 0]) * n).sum(axis=1) > 0
-    faces[flip] = faces[flip][:, [0, 2, 1]]
-    return _compact(points, faces)
+    return Tetrahedra(points, blockers).shape(radius)
 
 
-def _boundary(tets: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray]:
-    """Faces (F, 3) that belong to exactly one of ``tets`` (T, 4), and the vertex opposite each (F,)."""
-    faces = np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 3, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 1]]])
-    opp = np.concatenate([tets[:, 0], tets[:, 1], tets[:, 2], tets[:, 3]])
-    srt = np.sort(faces, axis=1).astype(np.int64)
-    n = np.int64(n_points)
-    key = (srt[:, 0] * n + srt[:, 1]) * n + srt[:, 2]
-    _, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
-    bnd = cnt[inv] == 1
-    return faces[bnd], opp[bnd]
+def _boundary(tets: np.ndarray, neighbours: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Faces (F, 3) of the kept ``tets`` (T, 4) whose neighbour across them (``neighbours`` (T, 4), the
+    tetrahedron opposite each vertex, -1 for none) is not kept, and the vertex opposite each (F,).
+    Face k of a tetrahedron is the one opposite its vertex k; faces come grouped by k, in tetrahedron order."""
+    out, opp = [], []
+    for k, cols in enumerate(([1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1])):
+        nb = neighbours[:, k]
+        bnd = keep & ((nb < 0) | ~keep[nb])
+        out.append(tets[bnd][:, cols])
+        opp.append(tets[bnd, k])
+    return np.concatenate(out), np.concatenate(opp)
 
 
 def _edge_keys(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -182,8 +205,9 @@ def lobe_hull(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray
 def plain_hull(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray, bool, tuple[float, ...]]:
     """``lobe_hull`` and the ``RADIUS_STEPS`` up to the one it used (all of them for a convex hull):
     what ``plain_steps`` would compute again."""
+    tet = Tetrahedra(points)
     for i, step in enumerate(RADIUS_STEPS):
-        shape = alpha_shape(points, radius * step)
+        shape = tet.shape(radius * step)
         if shape is not None and is_closed_manifold(shape[1]):
             return shape[0], shape[1], True, RADIUS_STEPS[: i + 1]
     v, f = convex_hull(points)
@@ -199,8 +223,9 @@ def carved_hull(points: np.ndarray, radius: float, blockers: np.ndarray | None,
     At one radius the carved shape lies inside the plain one: adding points to a Delaunay
     tetrahedralisation only removes tetrahedra among the old points, and carving only drops more.
     """
+    tet = Tetrahedra(points, blockers)
     for step in steps:
-        shape = alpha_shape(points, radius * step, blockers)
+        shape = tet.shape(radius * step)
         if shape is not None and is_closed_manifold(shape[1]):
             return shape
     return None
@@ -240,6 +265,66 @@ def _winding_kernel(v: np.ndarray, f: np.ndarray, q: np.ndarray, out: np.ndarray
                    + (c0 * a0 + c1 * a1 + c2 * a2) * lb)
             total += math.atan2(det, den)
         out[i] = 2.0 * total / (4.0 * math.pi)
+
+
+def inside(vertices: np.ndarray, faces: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(M,) bool: which ``q`` (M, 3) lie inside the closed, outward-oriented mesh; ``winding_numbers > 0.5``
+    at a fraction of the cost (points on the surface may go either way).
+
+    Counts the signed crossings of a ray from each point straight up (+Z): +1 through a face whose normal
+    points up, -1 down. Faces whose footprint in XY misses the point cost a few comparisons. A point whose
+    ray meets an edge or vertex exactly counts it once: each edge's side test is computed in one order
+    (lower vertex index first) for both faces that share it, and a zero counts as the side the point
+    would lie on if moved an infinitesimal step along (-eps, 1) (a symbolic perturbation).
+    """
+    q = np.ascontiguousarray(q, dtype=np.float64).reshape(-1, 3)
+    out = np.zeros(len(q), np.int64)
+    if len(q) and len(faces):
+        _crossing_kernel(np.ascontiguousarray(vertices, dtype=np.float64),
+                         np.ascontiguousarray(faces, dtype=np.int64), q, out)
+    return out > 0
+
+
+@njit(cache=True)
+def _side(v: np.ndarray, a: int, b: int, x: float, y: float) -> int:  # pragma: no cover - numba
+    """+1 / -1: the side of the directed edge a -> b (in XY) the point (x, y) lies on; never 0."""
+    s = 1
+    if a > b:
+        a, b, s = b, a, -1
+    dx, dy = v[b, 0] - v[a, 0], v[b, 1] - v[a, 1]
+    e = dx * (y - v[a, 1]) - dy * (x - v[a, 0])
+    if e == 0.0:
+        e = dx if dx != 0.0 else dy
+    return s if e > 0.0 else -s
+
+
+@njit(cache=True)
+def _crossing_kernel(v: np.ndarray, f: np.ndarray, q: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - numba
+    lo = np.zeros((f.shape[0], 2))
+    hi = np.zeros((f.shape[0], 2))
+    zmax = np.zeros(f.shape[0])
+    for t in range(f.shape[0]):
+        for k in range(2):
+            lo[t, k] = min(v[f[t, 0], k], v[f[t, 1], k], v[f[t, 2], k])
+            hi[t, k] = max(v[f[t, 0], k], v[f[t, 1], k], v[f[t, 2], k])
+        zmax[t] = max(v[f[t, 0], 2], v[f[t, 1], 2], v[f[t, 2], 2])
+    for i in range(q.shape[0]):
+        x, y, z = q[i, 0], q[i, 1], q[i, 2]
+        total = 0
+        for t in range(f.shape[0]):
+            if x < lo[t, 0] or x > hi[t, 0] or y < lo[t, 1] or y > hi[t, 1] or z > zmax[t]:
+                continue
+            a, b, c = f[t, 0], f[t, 1], f[t, 2]
+            s0 = _side(v, b, c, x, y)
+            if _side(v, c, a, x, y) != s0 or _side(v, a, b, x, y) != s0:
+                continue
+            w0 = (v[c, 0] - v[b, 0]) * (y - v[b, 1]) - (v[c, 1] - v[b, 1]) * (x - v[b, 0])
+            w1 = (v[a, 0] - v[c, 0]) * (y - v[c, 1]) - (v[a, 1] - v[c, 1]) * (x - v[c, 0])
+            w2 = (v[b, 0] - v[a, 0]) * (y - v[a, 1]) - (v[b, 1] - v[a, 1]) * (x - v[a, 0])
+            w = w0 + w1 + w2
+            if w != 0.0 and (w0 * v[a, 2] + w1 * v[b, 2] + w2 * v[c, 2]) / w > z:
+                total += s0
+        out[i] = total
 
 
 def winding_numbers_reference(vertices: np.ndarray, faces: np.ndarray, q: np.ndarray) -> np.ndarray:

@@ -18,7 +18,7 @@ import numpy as np
 
 from arboretum_library.errors import InputError
 
-from .lobes import kmeans, winding_numbers
+from .lobes import inside, kmeans
 from .merge import sample_polylines
 from .secondary import boxes, carve_lobe, foreign, make_lobes, zones
 from .state import Decomposition, LobeState, build_hbl
@@ -83,7 +83,7 @@ def _give_way(lobes: list[LobeState], n_kept: int, cross: list[int], pts: np.nda
     for k in range(n_kept, len(lobes)):
         lo, hi = lobes[k].hull_vertices.min(axis=0), lobes[k].hull_vertices.max(axis=0)
         near = wood[((wood > lo) & (wood < hi)).all(axis=1)]
-        if len(near) and (winding_numbers(lobes[k].hull_vertices, lobes[k].hull_faces, near) > 0.5).any():
+        if len(near) and inside(lobes[k].hull_vertices, lobes[k].hull_faces, near).any():
             carve_lobe(lobes, k, pts, wood, radius)
 
 

@@ -28,7 +28,7 @@ from scipy.spatial import cKDTree
 
 from .graph import path_to, shortest_paths, weighted
 from .grid import BoxGrid
-from .lobes import RADIUS_STEPS, carved_hull, plain_hull, plain_steps, winding_numbers
+from .lobes import RADIUS_STEPS, carved_hull, inside, plain_hull, plain_steps
 from .merge import BranchSet, centre_paths, merge_secondaries, resample_step, sample_polylines
 from .options import DecomposeOptions
 from .smooth import smooth_polylines, vertex_limits
@@ -78,7 +78,7 @@ def inside_foreign(lobes: list[LobeState], j: int, q: np.ndarray,
         sel = np.flatnonzero(inbox[k] & ~out)
         if len(sel):
             lb = lobes[k]
-            out[sel] = winding_numbers(lb.hull_vertices, lb.hull_faces, q[sel]) > 0.5
+            out[sel] = inside(lb.hull_vertices, lb.hull_faces, q[sel])
     return out
 
 
@@ -130,7 +130,11 @@ def _segment_samples(a: np.ndarray, b: np.ndarray, step: float) -> tuple[np.ndar
     """Points every ~``step`` along the segments a[i] -> b[i] ((S, 3) each) and the segment of each."""
     counts = np.maximum(2, np.ceil(np.linalg.norm(b - a, axis=1) / step).astype(int) + 1)
     which = np.repeat(np.arange(len(a)), counts)
-    t = np.concatenate([np.linspace(0.0, 1.0, c) for c in counts])[:, None]
+    first = np.cumsum(counts) - counts
+    i = np.arange(len(which)) - first[which]
+    t = i * (1.0 / (counts - 1))[which]  # np.linspace(0, 1, count) for each segment, bit for bit
+    t[first + counts - 1] = 1.0
+    t = t[:, None]
     return a[which] + t * (b[which] - a[which]), which
 
 
@@ -193,7 +197,7 @@ def unwrap(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, ra
             continue
         lo, hi = lb.hull_vertices.min(axis=0), lb.hull_vertices.max(axis=0)
         c = near_pts[((near_pts > lo) & (near_pts < hi)).all(axis=1)]
-        if not len(c) or not (winding_numbers(lb.hull_vertices, lb.hull_faces, c) > 0.5).any():
+        if not len(c) or not inside(lb.hull_vertices, lb.hull_faces, c).any():
             continue
         if carve_lobe(lobes, k, pts, wood, radius):
             changed += 1
@@ -232,7 +236,7 @@ def part_overlaps(lobes: list[LobeState], start: int, mains: BranchSet, pts: np.
         c = lobes[j].centre[None]
         lo, hi = boxes(lobes)
         for k in np.flatnonzero(((c > lo) & (c < hi)).all(axis=1)):
-            if k == j or not (winding_numbers(lobes[k].hull_vertices, lobes[k].hull_faces, c) > 0.5).any():
+            if k == j or not inside(lobes[k].hull_vertices, lobes[k].hull_faces, c).any():
                 continue
             changed += carve_lobe(lobes, int(k), pts, np.concatenate([pts[lobes[j].members], wood]), radius)
         if inside_foreign(lobes, j, c)[0]:
