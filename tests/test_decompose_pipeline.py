@@ -193,8 +193,13 @@ def test_refinement_operations(leaf_on):
 @pytest.mark.parametrize("rounds", [1, 2])
 def test_rerouted_kept_lobes_keep_their_places(leaf_on, monkeypatch, rounds):
     # Kept lobes 0 and 2 are made to cross the merged lobe once: they are routed again with it (2 rounds)
-    # or left (1 round: no round left); either way every lobe keeps its place and the merged one is last.
+    # or left (1 round: no round left); either way every lobe keeps its place and its hull (lobe 0's is
+    # grown 10% first, so a hull rebuilt from its points would differ), and the merged one is last.
+    from dataclasses import replace
+
     d = leaf_on[2]
+    grown = d.lobes[0].centre + 1.1 * (d.lobes[0].hull_vertices - d.lobes[0].centre)
+    d = replace(d, lobes=(replace(d.lobes[0], hull_vertices=grown), *d.lobes[1:]))
     calls = []
 
     def crossing(lobes, n_kept, tol):  # before and after the new lobe gives way, then never
@@ -208,6 +213,7 @@ def test_rerouted_kept_lobes_keep_their_places(leaf_on, monkeypatch, rounds):
     assert calls == ([N_L - 2, N_L - 2] if rounds == 2 else [])  # the last round is not checked
     kept = [k for k in range(N_L) if k not in (5, 6)]
     assert all(np.array_equal(m.lobes[i].members, d.lobes[k].members) for i, k in enumerate(kept))
+    assert all(np.array_equal(m.lobes[i].hull_vertices, d.lobes[k].hull_vertices) for i, k in enumerate(kept))
     assert len(m.lobes[-1].members) == len(d.lobes[5].members) + len(d.lobes[6].members)
 
 

@@ -46,23 +46,25 @@ def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], c
     kept, groups, centres = list(kept), list(groups), list(centres)
     slots = list(order) if order is not None else list(range(len(kept) + len(groups)))
     lobes: list[LobeState] = list(kept)
+    hulls: tuple[LobeState, ...] = ()  # the lobes a later round routes again keep their hulls
     for rnd in range(ROUTE_ROUNDS):
         if not groups:
             break
         zone = zones(d.points, [lb.members for lb in kept] + groups)
         lobes = make_lobes(groups, np.array(centres), d.points, d.adjacency, d.root_index, zone, d.mains,
-                           d.grid, d.tau, d.options, tuple(kept))[0]
+                           d.grid, d.tau, d.options, tuple(kept), (None,) * (len(groups) - len(hulls)) + hulls)[0]
         cross = sorted(_crossing_new(lobes, len(kept), d.options.step / 2)) if rnd + 1 < ROUTE_ROUNDS else []
         if cross:  # the new lobes give way to the branches already there, if carving lets them
             _give_way(lobes, len(kept), cross, d.points, d.options.alpha_radius)
             cross = sorted(_crossing_new(lobes, len(kept), d.options.step / 2))
         if not cross:
             break
-        # next round: this round's lobes stay, the crossing kept lobes are rebuilt and routed again
+        # next round: this round's lobes stay, the crossing kept lobes (hulls kept) are routed again
         n = len(kept)
         slots = [slots[i] for i in range(n) if i not in cross] + slots[n:] + [slots[i] for i in cross]
         groups = [lobes[i].members for i in cross]
         centres = [lobes[i].centre for i in cross]
+        hulls = tuple(lobes[i] for i in cross)
         kept = [lb for i, lb in enumerate(lobes) if i >= n or i not in cross]
     lobes = [lb for _, lb in sorted(zip(slots, lobes), key=lambda t: t[0])]
     lobe_of = np.full(len(d.points), -1, np.int32)

@@ -284,18 +284,25 @@ def _finish(seg: np.ndarray, centre: np.ndarray) -> np.ndarray:
 
 def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, adjacency: csr_matrix,
                root: int, zone: np.ndarray, mains: BranchSet, grid: BoxGrid, tau: float,
-               o: DecomposeOptions, others: tuple[LobeState, ...] = ()) -> tuple[list[LobeState], np.ndarray, int]:
+               o: DecomposeOptions, others: tuple[LobeState, ...] = (),
+               hulls: tuple[LobeState | None, ...] = ()) -> tuple[list[LobeState], np.ndarray, int]:
     """Lobes over the point-index ``groups`` with hulls and routed, merged secondary branches.
 
     ``others`` are lobes kept from before (zone ids 0..len(others)-1; the new lobes follow them).
+    ``hulls[i]``, when given, is a lobe over ``groups[i]`` whose hull the group keeps (a kept lobe whose
+    branch is routed again); other groups get their plain hull.
     Returns every lobe (``others`` first, then the new ones; any of them may come back with the main
     branches carved out, see ``unwrap``, or carved round a new lobe whose centre it buried, see
     ``part_overlaps``, which may instead move that new lobe's centre onto one of its own points), the
     routing predecessors (N,) and the number of branches routed again.
     """
     lobes = list(others)
-    for g, c in zip(groups, centres):
-        verts, faces, used_alpha, steps = plain_hull(pts[g], o.alpha_radius)
+    for i, (g, c) in enumerate(zip(groups, centres)):
+        old = hulls[i] if i < len(hulls) else None
+        if old is not None:
+            verts, faces, used_alpha, steps = old.hull_vertices, old.hull_faces, old.alpha, old.steps
+        else:
+            verts, faces, used_alpha, steps = plain_hull(pts[g], o.alpha_radius)
         lobes.append(LobeState(g, np.asarray(c, np.float64), verts, faces, used_alpha, np.zeros((0, 3)), -1, -1,
                                steps))
     part_overlaps(lobes, len(others), mains, pts, o.alpha_radius)
