@@ -301,3 +301,21 @@ def test_height_none_keeps_scan_units_and_position(truth):
     lobe = d.hbl.lobes[0].points
     s = refine.split_lobe(d, 0, [lobe[:1], lobe[-1:]])
     assert len(s.hbl.lobes) == 9 and connected(s.hbl)
+
+
+def test_refinements_reuse_zone_sources_only_while_the_lobes_cover_the_same_points(leaf_on):
+    from arboretum_server.decompose.secondary import zone_sources
+
+    def same_as_fresh(x):  # the nearest lobe point within the zone radius, found again from scratch
+        fresh = zone_sources(x.points, np.flatnonzero(x.lobe_of >= 0))
+        near = lambda s: np.where(s >= 0, np.linalg.norm(x.points - x.points[np.maximum(s, 0)], axis=1), -1.0)  # noqa: E731
+        return np.array_equal(fresh >= 0, x.zone_sources >= 0) and np.allclose(near(fresh), near(x.zone_sources))
+
+    d = leaf_on[2]
+    assert d.zone_sources is not None and same_as_fresh(d)
+    m = refine.merge_lobes(d, [1, 2])
+    assert m.zone_sources is d.zone_sources and same_as_fresh(m)  # points traded, union kept: reused
+    wood = np.flatnonzero(d.lobe_of < 0)[:40]  # points of no lobe join the new one: found again
+    i = refine.insert_lobe(d, np.r_[d.lobes[3].members[:20], wood])
+    assert i.zone_sources is not d.zone_sources and same_as_fresh(i)
+    assert not np.array_equal(i.zone_sources, d.zone_sources)

@@ -26,7 +26,7 @@ from .options import DecomposeOptions
 from .preprocess import prepare
 from .radii import trunk_radius
 from .sampling import farthest_points
-from .secondary import branch_paths, make_lobes, zones
+from .secondary import branch_paths, make_lobes, zone_sources, zones
 from .separate import separate
 from .smooth import smooth_branchset
 from .state import Decomposition, build_hbl
@@ -167,7 +167,8 @@ def decompose(points: np.ndarray, options: DecomposeOptions = DecomposeOptions()
     fol, source = foliage_points(lab, pts, off_main, o, grow=prep.labels is None, bare=bare)
     k_lab, centres = kmeans(pts[fol], o.counts()[1], rng)
     groups = [fol[k_lab == j] for j in range(len(centres))]
-    zone = zones(pts, groups)
+    sources = zone_sources(pts, np.concatenate(groups))
+    zone = zones(pts, groups, sources)
     clock.lap("lobes")
     lobes, pred2, rerouted = make_lobes(groups, centres, pts, g.adjacency, root, zone, mains, grid, tau, o)
     clock.lap("secondary")
@@ -181,7 +182,8 @@ def decompose(points: np.ndarray, options: DecomposeOptions = DecomposeOptions()
         "merge_threshold": tau,
     }
     d = Decomposition(None, pts, lab, root, pred2, mains, tuple(lobes), lobe_of, r_trunk, o,  # type: ignore[arg-type]
-                      prep.scale, prep.root_scan, prep.source_index, g.adjacency, clock.timing, stats, tau, grid)
+                      prep.scale, prep.root_scan, prep.source_index, g.adjacency, clock.timing, stats, tau, grid,
+                      sources)
     d = replace(d, hbl=build_hbl(d))
     clock.lap("hbl")
     return d

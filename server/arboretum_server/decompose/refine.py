@@ -20,7 +20,7 @@ from arboretum_library.errors import InputError
 
 from .lobes import inside, kmeans
 from .merge import sample_polylines
-from .secondary import boxes, carve_lobe, foreign, make_lobes, zones
+from .secondary import boxes, carve_lobe, foreign, make_lobes, zone_sources, zones
 from .state import Decomposition, LobeState, build_hbl
 
 ROUTE_ROUNDS = 3
@@ -47,10 +47,13 @@ def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], c
     slots = list(order) if order is not None else list(range(len(kept) + len(groups)))
     lobes: list[LobeState] = list(kept)
     hulls: tuple[LobeState, ...] = ()  # the lobes a later round routes again keep their hulls
+    sources = _sources(d, [lb.members for lb in kept] + groups)
     for rnd in range(ROUTE_ROUNDS):
         if not groups:
             break
-        zone = zones(d.points, [lb.members for lb in kept] + groups)
+        if sources is None:
+            sources = zone_sources(d.points, np.concatenate([lb.members for lb in kept] + groups))
+        zone = zones(d.points, [lb.members for lb in kept] + groups, sources)
         lobes = make_lobes(groups, np.array(centres), d.points, d.adjacency, d.root_index, zone, d.mains,
                            d.grid, d.tau, d.options, tuple(kept), (None,) * (len(groups) - len(hulls)) + hulls)[0]
         cross = sorted(_crossing_new(lobes, len(kept), d.options.step / 2)) if rnd + 1 < ROUTE_ROUNDS else []
@@ -71,9 +74,17 @@ def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], c
     for j, lb in enumerate(lobes):
         lobe_of[lb.members] = j
     stats = dict(d.stats, lobes=len(lobes))
-    out = replace(d, lobes=tuple(lobes), lobe_of=lobe_of, stats=stats,
+    out = replace(d, lobes=tuple(lobes), lobe_of=lobe_of, stats=stats, zone_sources=sources,
                   timing=dict(d.timing, **{op: time.perf_counter() - t0}))
     return replace(out, hbl=build_hbl(out))
+
+
+def _sources(d: Decomposition, members: list[np.ndarray]) -> np.ndarray | None:
+    """``d.zone_sources`` when the lobes' ``members`` cover the same points as ``d``'s lobes, else None."""
+    union = np.zeros(len(d.points), bool)
+    for m in members:
+        union[m] = True
+    return d.zone_sources if d.zone_sources is not None and np.array_equal(union, d.lobe_of >= 0) else None
 
 
 def _give_way(lobes: list[LobeState], n_kept: int, cross: list[int], pts: np.ndarray, radius: float,

@@ -42,17 +42,28 @@ FOREIGN_COST = 1000.0
 """Edge-length factor inside foreign lobe zones when a secondary branch is routed again."""
 
 
-def zones(pts: np.ndarray, groups: list[np.ndarray]) -> np.ndarray:
-    """(N,) int32: the lobe whose points lie nearest each point within ZONE_RADIUS, -1 for none."""
-    members = np.concatenate(groups) if groups else np.zeros(0, int)
-    zone = np.full(len(pts), -1, np.int32)
+def zone_sources(pts: np.ndarray, members: np.ndarray) -> np.ndarray:
+    """(N,) int64: for each point, the one of ``members`` (indices into ``pts``) nearest it within
+    ZONE_RADIUS, -1 for none. Lobes trade points but keep their union (merge, split), so this outlives them."""
+    src = np.full(len(pts), -1, np.int64)
     if len(members) == 0:
-        return zone
-    owner = np.concatenate([np.full(len(g), j) for j, g in enumerate(groups)])
+        return src
     d, i = cKDTree(pts[members]).query(pts, distance_upper_bound=ZONE_RADIUS)
     hit = np.isfinite(d)
-    zone[hit] = owner[i[hit]]
-    return zone
+    src[hit] = members[i[hit]]
+    return src
+
+
+def zones(pts: np.ndarray, groups: list[np.ndarray], sources: np.ndarray | None = None) -> np.ndarray:
+    """(N,) int32: the lobe whose points lie nearest each point within ZONE_RADIUS, -1 for none.
+    ``sources``: ``zone_sources`` of the groups' union, when known."""
+    members = np.concatenate(groups).astype(np.int64) if groups else np.zeros(0, np.int64)
+    if sources is None:
+        sources = zone_sources(pts, members)
+    owner = np.full(len(pts), -1, np.int32)
+    for j, g in enumerate(groups):
+        owner[g] = j
+    return np.where(sources >= 0, owner[np.maximum(sources, 0)], -1).astype(np.int32)
 
 
 def branch_paths(nodes: list[int], pred: np.ndarray, pts: np.ndarray, grid: BoxGrid, step: float) -> list[np.ndarray]:

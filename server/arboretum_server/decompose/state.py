@@ -78,6 +78,9 @@ class Decomposition:
     """The merge threshold used (0.8 m frame): the option, raised to the trunk radius for thick trunks."""
     grid: Any = None
     """The BoxGrid that centres branch vertices in the cloud."""
+    zone_sources: np.ndarray | None = None
+    """(N,) int64: ``secondary.zone_sources`` of the lobes' points (the points with ``lobe_of`` >= 0); None:
+    computed again when needed."""
 
     def to_output(self, p: np.ndarray) -> np.ndarray:
         """Working-frame points (..., 3) in the output frame."""
