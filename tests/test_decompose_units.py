@@ -551,3 +551,15 @@ def test_a_new_lobe_gives_way_to_a_kept_branch_through_it(rng):
     q = rng.uniform(blob.min(axis=0), blob.max(axis=0), (800, 3))
     now = winding_numbers(lobes[1].hull_vertices, lobes[1].hull_faces, q) > 0.5
     assert now.any() and not (now & (winding_numbers(vb, fb, q) <= 0.5)).any()
+
+
+def test_zone_sources_do_not_depend_on_the_order_of_the_lobe_points(rng):
+    from arboretum_server.decompose.secondary import zone_sources
+
+    # every point twice (a merged scan): the nearest lobe point ties between the two copies
+    base = rng.uniform(0, 0.1, (100, 3))
+    pts = np.vstack([base, base, base[:50] + 0.003])
+    members = np.arange(200)
+    a, b = zone_sources(pts, members), zone_sources(pts, members[::-1])
+    assert np.array_equal(a, b) and (a[200:] >= 0).all()
+    assert (a[:200] % 100 == np.arange(200) % 100).all()  # a lobe point's nearest is itself or its copy

@@ -54,8 +54,9 @@ def _circumradii(p: np.ndarray) -> np.ndarray:
 
 
 class Tetrahedra:
-    """The Delaunay tetrahedralisation of a cluster (and its blockers) with every circumradius and
-    neighbour: built once, cut at as many probe radii as ``plain_hull`` and ``carved_hull`` try."""
+    """The Delaunay tetrahedralisation of a cluster (and its blockers), the neighbours of every
+    tetrahedron and the circumradius of those made of the cluster's own points (inf where one touches a
+    blocker): built once, cut at as many probe radii as ``plain_hull`` and ``carved_hull`` try."""
 
     def __init__(self, points: np.ndarray, blockers: np.ndarray | None = None):
         self.n_own = len(points)

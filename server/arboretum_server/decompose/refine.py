@@ -25,8 +25,8 @@ from .state import Decomposition, LobeState, build_hbl
 
 ROUTE_ROUNDS = 3
 """Routing rounds of a refinement (``make_lobes`` calls): kept lobes whose branches run through the new
-lobes of one round are rebuilt and routed again in the next, among everything else built so far; the
-last round's result stands."""
+lobes of one round keep their hulls and are routed again in the next, among everything else built so
+far; the last round's result stands."""
 
 
 def _lobe_index(d: Decomposition, j: int) -> int:

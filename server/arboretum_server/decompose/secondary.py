@@ -44,10 +44,12 @@ FOREIGN_COST = 1000.0
 
 def zone_sources(pts: np.ndarray, members: np.ndarray) -> np.ndarray:
     """(N,) int64: for each point, the one of ``members`` (indices into ``pts``) nearest it within
-    ZONE_RADIUS, -1 for none. Lobes trade points but keep their union (merge, split), so this outlives them."""
+    ZONE_RADIUS, -1 for none. Lobes trade points but keep their union (merge, split), so this outlives them;
+    the members are sorted first, so exact ties (duplicate points) go the same way however they are listed."""
     src = np.full(len(pts), -1, np.int64)
     if len(members) == 0:
         return src
+    members = np.sort(members)
     d, i = cKDTree(pts[members]).query(pts, distance_upper_bound=ZONE_RADIUS)
     hit = np.isfinite(d)
     src[hit] = members[i[hit]]
