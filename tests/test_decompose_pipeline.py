@@ -252,6 +252,23 @@ def test_refinement_rejects_bad_requests(leaf_on):
         refine.split_lobe(d, 0, [np.zeros((2, 3))])
     with pytest.raises(InputError, match="point indices"):
         refine.insert_lobe(d, [len(d.points) + 5])
+    stroke = d.hbl.lobes[0].points[:2]
+    bad = [  # wrong types and values a script can pass: one InputError each, never a numpy error
+        (lambda: refine.remove_lobe(d, 1.5), "not a lobe number"), (lambda: refine.remove_lobe(d, None), "not a lobe"),
+        (lambda: refine.remove_lobe(d, True), "not a lobe"), (lambda: refine.merge_lobes(d, 3), "list of lobe"),
+        (lambda: refine.merge_lobes(d, [0.0, 1.0]), "not a lobe"),
+        (lambda: refine.insert_lobe(d, [1.5, 2.7]), "integers"),  # not truncated to [1, 2]
+        (lambda: refine.insert_lobe(d, np.ones(len(d.points), bool)), "integers"),  # not the 1-point lobe {1}
+        (lambda: refine.insert_lobe(d, [[1, 2], [3]]), "integers"),
+        (lambda: refine.split_lobe(d, 0, [stroke, np.full((2, 3), np.nan)]), "stroke 1"),
+        (lambda: refine.split_lobe(d, 0, [stroke, np.zeros((0, 3))]), "stroke 1"),
+        (lambda: refine.split_lobe(d, 0, [stroke[:, :2], stroke[:, :2]]), "stroke 0"),
+        (lambda: refine.split_lobe(d, 0, [stroke, stroke + 0.01], seed=-1), "seed"),
+    ]
+    for call, message in bad:
+        with pytest.raises(InputError, match=message):
+            call()
+    assert len(refine.remove_lobe(d, np.int64(1)).lobes) == N_L - 1  # numpy integers are lobe numbers
 
 
 def test_cli_stores_examples_and_saves_hbl(truth, tmp_path, capsys):
@@ -279,8 +296,25 @@ def test_cli_stores_examples_and_saves_hbl(truth, tmp_path, capsys):
     for bad in ("1.5", "nan"):
         assert main(["decompose", str(scan), "--reach-weight", bad, "--library", str(lib)]) == 2
         assert "--reach-weight must lie in 0..1" in capsys.readouterr().err
+    refused = {  # each refused before or during the work, with one line naming the input
+        ("--points", "10"): "downsampling to 10 points", ("--seed", "-1"): "--seed must not be negative",
+        ("--height", "inf"): "--height must be a finite number", ("--lobes", "100000"): "lobes: 100000 asked",
+        ("--main", "1000"): "main branches: 1000 asked", ("--save-hbl", str(tmp_path)): "is a folder",
+        ("--save-hbl", str(tmp_path / "no" / "x.npz")): "folder that does not exist",
+    }
+    for (flag, value), message in refused.items():
+        assert main(["decompose", str(scan), flag, value, "--up", "z", "--library", str(lib)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], err
+        assert str(scan) in err[0] or flag != "--lobes"  # found while decomposing: the scan is named
+    assert main(["decompose", str(scan), "--library", "/proc/arboretum-lib"]) == 2  # cannot be created
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "/proc/arboretum-lib" in err[0]
     with Library.open(lib) as library:  # nothing stored by the refused runs
         assert sorted(library.ids()) == sorted(data["stored"])
+    assert main(["decompose", str(scan), "--species", "oak", "--up", "z", "--json"]) == 0
+    notes = json.loads(capsys.readouterr().out)["notes"]
+    assert len(notes) == 1 and "'oak' is not in VRTree Table 2" in notes[0] and "N_l = 40" in notes[0]
 
 
 def test_virtual_scanner_leaf_off_tree_meets_the_floor():

@@ -93,6 +93,11 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # output piped into e.g. `head`, which closed early: not an error
         sys.stderr.close()
         return 0
+    except OSError as exc:  # a path the user named that cannot be read or written
+        if exc.filename is None:
+            raise
+        print(f"arboretum {args.command}: error: {exc.filename}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -8,8 +8,10 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import time
+from contextlib import ExitStack
 
 from arboretum_library.cli import add_json_flag, emit
 
@@ -18,7 +20,7 @@ UP_CHOICES = ("auto", "z", "y")
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("decompose", help="decompose a tree scan into HBL examples (VRTree 3.4)")
-    p.add_argument("scan", help="point cloud file (.xyz/.txt/.ply/.las/.laz/.npz ...)")
+    p.add_argument("scan", help="point cloud file (.xyz/.txt/.ply/.las/.laz/.npy ...)")
     p.add_argument("--species", default="unknown", help="species; picks N_m and N_l from VRTree Table 2")
     p.add_argument("--main", type=int, default=None, metavar="N", help="N_m, number of main branches")
     p.add_argument("--lobes", type=int, default=None, metavar="N", help="N_s = N_l, number of lobes")
@@ -46,8 +48,10 @@ def _options(args: argparse.Namespace):
         v = getattr(args, name)
         if v is not None and v < 1:
             raise InputError(f"--{name} must be at least 1, got {v}")
-    if args.points < 0 or args.height < 0:
-        raise InputError("--points and --height must not be negative")
+    if args.points < 0 or not (math.isfinite(args.height) and args.height >= 0):
+        raise InputError("--points must not be negative and --height must be a finite number >= 0")
+    if args.seed < 0:
+        raise InputError(f"--seed must not be negative, got {args.seed}")
     if args.reach_weight is not None and not 0.0 <= args.reach_weight <= 1.0:
         raise InputError(f"--reach-weight must lie in 0..1, got {args.reach_weight}")
     return DecomposeOptions(
@@ -58,6 +62,7 @@ def _options(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     from arboretum_library.codec import save_record
+    from arboretum_library.errors import InputError
     from arboretum_library.pointio import ReadOptions, read_points
     from arboretum_library.progress import StatusLine
 
@@ -66,31 +71,63 @@ def run(args: argparse.Namespace) -> int:
 
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     options = _options(args)
+    _check_output(args.save_hbl)
+    notes = _notes(options)
     t0 = time.perf_counter()
     cloud = read_points(args.scan, ReadOptions(up=args.up))
     t_read = time.perf_counter() - t0
     status = StatusLine() if not args.json else (lambda *a: None)
-    dec = decompose(cloud.points, options, status, labels=cloud.labels)
-    prov = provenance(args.scan, options)
-    stored, where = [], None
-    if args.library:
-        from arboretum_library.store import Library
+    with ExitStack() as stack:
+        lib = None
+        if args.library:  # opened first: a library that cannot be written fails before the work
+            from arboretum_library.store import Library
 
-        stem = os.path.splitext(os.path.basename(args.scan))[0]
-        with Library.open(args.library, create=True) as lib:
+            lib = stack.enter_context(Library.open(args.library, create=True))
+        try:
+            dec = decompose(cloud.points, options, status, labels=cloud.labels)
+        except InputError as exc:
+            raise InputError(f"{args.scan}: {exc}") from None
+        prov = provenance(args.scan, options)
+        stored: list[str] = []
+        if lib is not None:
+            stem = os.path.splitext(os.path.basename(args.scan))[0]
             examples = make_examples(dec.hbl, prov, lambda: lib.new_id(stem), lambda e: stored.append(lib.add(e)))
-        where = str(args.library)
-    else:
-        examples = make_examples(dec.hbl, prov, counter_ids("example"))
+        else:
+            examples = make_examples(dec.hbl, prov, counter_ids("example"))
     if args.save_hbl:
         save_record(args.save_hbl, dec.hbl)
     data = {
         "scan": args.scan, "points_read": len(cloud.points), "stats": dec.stats,
         "timing_s": {"read": t_read, **dec.timing}, "examples": [e.id for e in examples],
-        "stored": stored, "library": where, "hbl": args.save_hbl, "options": options.as_dict(),
+        "stored": stored, "library": str(args.library) if lib is not None else None, "hbl": args.save_hbl,
+        "options": options.as_dict(), "notes": notes,
     }
     emit(args, data, _text(data))
     return 0
+
+
+def _check_output(path: str | None) -> None:
+    """InputError unless ``path`` (the --save-hbl target) can be a file in an existing folder."""
+    from arboretum_library.errors import InputError
+
+    if path is None:
+        return
+    folder = os.path.dirname(os.path.abspath(path))
+    if os.path.isdir(path) or not os.path.isdir(folder):
+        what = "is a folder" if os.path.isdir(path) else f"is in a folder that does not exist ({folder})"
+        raise InputError(f"--save-hbl {path} {what}")
+
+
+def _notes(options) -> list[str]:
+    """What the run assumes that the user may not expect (printed with the result)."""
+    from .options import SPECIES_COUNTS
+
+    if options.species in SPECIES_COUNTS or options.species == "unknown" or None not in (options.n_main,
+                                                                                          options.n_lobes):
+        return []
+    n_m, n_l = options.counts()
+    return [f"species '{options.species}' is not in VRTree Table 2 ({', '.join(SPECIES_COUNTS)}): "
+            f"N_m = {n_m}, N_l = {n_l} (the table's medians)"]
 
 
 def _text(d: dict) -> str:
@@ -110,4 +147,5 @@ def _text(d: dict) -> str:
         lines.append(f"{len(d['examples'])} examples made (not stored: no --library given)")
     if d["hbl"]:
         lines.append(f"whole-tree HBL saved to {d['hbl']}")
+    lines += [f"note: {n}" for n in d["notes"]]
     return "\n".join(lines)

@@ -131,6 +131,9 @@ def prepare(
     labels: np.ndarray | None = None,
 ) -> Prepared:
     """Validate, remove ground, downsample to ``options.points`` and normalise. InputError on bad input."""
+    if 0 < options.points < options.min_points:
+        raise InputError(f"points: downsampling to {options.points} points leaves too few to decompose a tree "
+                         f"(at least {options.min_points}, or 0 to keep all)")
     pts = validate(points, options)
     keep = np.isfinite(pts).all(axis=1)
     ground = ground_mask(pts[keep], options.ground_band)
@@ -140,6 +143,7 @@ def prepare(
     if options.points and len(idx) > options.points:
         idx = np.sort(rng.choice(idx, options.points, replace=False))
     sub = pts[idx]
+    _check_counts(len(sub), options)
     root = find_root(sub)
     height = float(sub[:, 2].max() - root[2])
     scale = WORK_HEIGHT / height
@@ -150,3 +154,17 @@ def prepare(
             raise InputError(f"labels: {lab.shape[0]} labels for {len(pts)} points")
         lab = (lab[idx] > 0).astype(np.uint8)
     return Prepared((sub - root) * scale, idx, lab, root, scale, int(ground.sum()))
+
+
+POINTS_PER_LOBE = 10
+"""Fewest points per lobe on average that a decomposition accepts (an alpha shape needs 5)."""
+
+
+def _check_counts(n: int, o: DecomposeOptions) -> None:
+    """InputError when N_m or N_l cannot be met on ``n`` points."""
+    n_main, n_lobes = o.counts()
+    if n_main > o.fps_candidates:
+        raise InputError(f"main branches: {n_main} asked, at most {o.fps_candidates} (the candidate paths)")
+    if n_lobes > n // POINTS_PER_LOBE:
+        raise InputError(f"lobes: {n_lobes} asked for {n} points, at most {n // POINTS_PER_LOBE} "
+                         f"({POINTS_PER_LOBE} points per lobe)")

@@ -11,6 +11,7 @@ refer to ``Decomposition.points``; strokes are in the HBL's output frame.
 
 from __future__ import annotations
 
+import operator
 import time
 from dataclasses import replace
 
@@ -30,9 +31,43 @@ far; the last round's result stands."""
 
 
 def _lobe_index(d: Decomposition, j: int) -> int:
+    try:
+        if isinstance(j, bool):
+            raise TypeError
+        j = operator.index(j)
+    except TypeError:
+        raise InputError(f"lobe {j!r} is not a lobe number (an integer 0..{len(d.lobes) - 1})") from None
     if not 0 <= j < len(d.lobes):
         raise InputError(f"lobe {j} does not exist (the tree has {len(d.lobes)} lobes)")
     return j
+
+
+def _point_indices(d: Decomposition, indices) -> np.ndarray:
+    """``indices`` as (K,) int64 point indices, InputError unless they are integers in range."""
+    try:
+        idx = np.asarray(indices)
+    except ValueError:
+        idx = np.zeros(0, object)
+    if idx.dtype.kind not in "iu" or idx.size == 0:
+        raise InputError(f"insert lobe: select 1 or more point indices (integers) in 0..{len(d.points) - 1}")
+    idx = np.unique(idx.astype(np.int64).reshape(-1))
+    if idx.min() < 0 or idx.max() >= len(d.points):
+        raise InputError(f"insert lobe: select 1 or more point indices in 0..{len(d.points) - 1}")
+    return idx
+
+
+def _strokes(strokes) -> list[np.ndarray]:
+    """Each stroke as (S >= 1, 3) finite float64; InputError otherwise."""
+    out = []
+    for k, s in enumerate(strokes if isinstance(strokes, (list, tuple, np.ndarray)) else [None]):
+        try:
+            a = np.asarray(s, dtype=np.float64)
+        except (TypeError, ValueError):
+            a = np.zeros((0, 0))
+        if a.ndim != 2 or a.shape[1] != 3 or len(a) == 0 or not np.isfinite(a).all():
+            raise InputError(f"split lobe: stroke {k} must be 1 or more finite 3D points (S, 3)")
+        out.append(a)
+    return out
 
 
 def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], centres: np.ndarray,
@@ -139,9 +174,7 @@ def insert_lobe(d: Decomposition, indices: np.ndarray) -> Decomposition:
     """A new lobe over the selected point ``indices``, taken from the lobes that held them: those get a
     new centre (their remaining points' mean), hull and secondary branch; the new lobe comes last."""
     t0 = time.perf_counter()
-    idx = np.unique(np.asarray(indices, dtype=np.int64).reshape(-1))
-    if len(idx) == 0 or idx.min() < 0 or idx.max() >= len(d.points):
-        raise InputError(f"insert lobe: select 1 or more point indices in 0..{len(d.points) - 1}")
+    idx = _point_indices(d, indices)
     kept, shrunk, at_kept, at_shrunk = _take(d, idx)
     groups = [*shrunk, idx]
     centres = np.array([d.points[g].mean(axis=0) for g in groups])
@@ -154,6 +187,8 @@ def merge_lobes(d: Decomposition, which: list[int]) -> Decomposition:
     """One lobe from the points of the lobes ``which`` (small lobes close together): new alpha shape,
     new secondary branch through Algorithm 1."""
     t0 = time.perf_counter()
+    if not isinstance(which, (list, tuple, np.ndarray)):
+        raise InputError("merge lobes: give the lobes as a list of lobe numbers")
     sel = sorted({_lobe_index(d, j) for j in which})
     if len(sel) < 2:
         raise InputError("merge lobes: select at least two different lobes")
@@ -175,11 +210,14 @@ def split_lobe(d: Decomposition, j: int, strokes: list[np.ndarray], seed: int = 
     k-means centre (their mean)."""
     t0 = time.perf_counter()
     lb = d.lobes[_lobe_index(d, j)]
+    strokes = _strokes(strokes)
+    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
+        raise InputError(f"split lobe: the seed must be an integer >= 0, got {seed!r}")
     if len(strokes) < 2:
         raise InputError("split lobe: draw at least two strokes (one per new lobe)")
     if len(strokes) > len(lb.members):
         raise InputError(f"split lobe: {len(strokes)} strokes for a lobe of {len(lb.members)} points")
-    init = np.stack([from_output(d, np.asarray(s, dtype=np.float64).reshape(-1, 3)).mean(axis=0) for s in strokes])
+    init = np.stack([from_output(d, s).mean(axis=0) for s in strokes])
     lab, centres = kmeans(d.points[lb.members], len(strokes), np.random.default_rng(seed), init=init)
     groups = [lb.members[lab == k] for k in range(len(strokes)) if (lab == k).any()]
     centres = np.array([d.points[g].mean(axis=0) for g in groups])
