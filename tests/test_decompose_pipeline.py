@@ -312,6 +312,19 @@ def test_cli_stores_examples_and_saves_hbl(truth, tmp_path, capsys):
     assert len(err) == 1 and "/proc/arboretum-lib" in err[0]
     with Library.open(lib) as library:  # nothing stored by the refused runs
         assert sorted(library.ids()) == sorted(data["stored"])
+    real_add, calls = Library.add, []
+
+    def interrupted_add(self, example, **kw):  # Ctrl-C while the third example is written
+        calls.append(example.id)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real_add(self, example, **kw)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(Library, "add", interrupted_add)
+        assert main(["decompose", str(scan), "--main", "4", "--lobes", "10", "--up", "z", "--library", str(lib)]) == 130
+    with Library.open(lib) as library:  # the two examples written before it are taken back
+        assert len(calls) == 3 and sorted(library.ids()) == sorted(data["stored"])
     assert main(["decompose", str(scan), "--species", "oak", "--up", "z", "--json"]) == 0
     notes = json.loads(capsys.readouterr().out)["notes"]
     assert len(notes) == 1 and "'oak' is not in VRTree Table 2" in notes[0] and "N_l = 40" in notes[0]

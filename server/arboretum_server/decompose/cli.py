@@ -91,7 +91,12 @@ def run(args: argparse.Namespace) -> int:
         stored: list[str] = []
         if lib is not None:
             stem = os.path.splitext(os.path.basename(args.scan))[0]
-            examples = make_examples(dec.hbl, prov, lambda: lib.new_id(stem), lambda e: stored.append(lib.add(e)))
+            try:
+                examples = make_examples(dec.hbl, prov, lambda: lib.new_id(stem), lambda e: stored.append(lib.add(e)))
+            except BaseException:  # Ctrl-C or a failed write: a tree is stored whole or not at all
+                for id_ in stored:
+                    lib.delete(id_)
+                raise
         else:
             examples = make_examples(dec.hbl, prov, counter_ids("example"))
     if args.save_hbl:
