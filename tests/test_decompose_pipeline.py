@@ -328,6 +328,11 @@ def test_cli_stores_examples_and_saves_hbl(truth, tmp_path, capsys):
     assert main(["decompose", str(scan), "--species", "oak", "--up", "z", "--json"]) == 0
     notes = json.loads(capsys.readouterr().out)["notes"]
     assert len(notes) == 1 and "'oak' is not in VRTree Table 2" in notes[0] and "N_l = 40" in notes[0]
+    assert main(["decompose", str(scan), "--main", "90", "--up", "z", "--json"]) == 0  # more than the tree has
+    data = json.loads(capsys.readouterr().out)
+    got = data["stats"]["main_branches"]
+    assert got < 90 and data["notes"] == [f"{got} main branches found, 90 asked: the other candidate paths "
+                                          "merged into them (Algorithm 1)"]
 
 
 def test_virtual_scanner_leaf_off_tree_meets_the_floor():

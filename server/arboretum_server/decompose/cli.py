@@ -105,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
         "scan": args.scan, "points_read": len(cloud.points), "stats": dec.stats,
         "timing_s": {"read": t_read, **dec.timing}, "examples": [e.id for e in examples],
         "stored": stored, "library": str(args.library) if lib is not None else None, "hbl": args.save_hbl,
-        "options": options.as_dict(), "notes": notes,
+        "options": options.as_dict(), "notes": notes + _shortfall(options, dec.stats),
     }
     emit(args, data, _text(data))
     return 0
@@ -121,6 +121,18 @@ def _check_output(path: str | None) -> None:
     if os.path.isdir(path) or not os.path.isdir(folder):
         what = "is a folder" if os.path.isdir(path) else f"is in a folder that does not exist ({folder})"
         raise InputError(f"--save-hbl {path} {what}")
+
+
+def _shortfall(options, stats: dict) -> list[str]:
+    """Notes for counts the decomposition could not meet."""
+    n_m, n_l = options.counts()
+    out = []
+    if stats["main_branches"] < n_m:
+        out.append(f"{stats['main_branches']} main branches found, {n_m} asked: the other candidate paths "
+                   "merged into them (Algorithm 1)")
+    if stats["lobes"] < n_l:
+        out.append(f"{stats['lobes']} lobes made, {n_l} asked: too few foliage points")
+    return out
 
 
 def _notes(options) -> list[str]:
