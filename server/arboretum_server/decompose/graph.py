@@ -179,6 +179,7 @@ def path_to(pred: np.ndarray, node: int) -> np.ndarray:
 
 def weighted(adj: csr_matrix, node_weight: np.ndarray) -> csr_matrix:
     """A copy of ``adj`` whose edge weights are scaled by the larger node weight of their two ends."""
-    coo = adj.tocoo()
-    w = coo.data * np.maximum(node_weight[coo.row], node_weight[coo.col])
-    return csr_matrix((w, (coo.row, coo.col)), shape=adj.shape)
+    adj = adj.tocsr()
+    rows = np.repeat(np.arange(adj.shape[0]), np.diff(adj.indptr))
+    w = adj.data * np.maximum(node_weight[rows], node_weight[adj.indices])
+    return csr_matrix((w, adj.indices, adj.indptr), shape=adj.shape)

@@ -208,15 +208,22 @@ def merge_mains(paths: list[np.ndarray], order: list[int], tau: float, n: int,
     return kept
 
 
+def main_references(mains: BranchSet, n: int, bins: tuple[int, int, int]) -> tuple[list, np.ndarray, list]:
+    """What ``merge_secondaries`` compares every path with: the main branches' reference paths, their
+    shape contexts and KD-trees (computed once for many calls on the same main branches)."""
+    refs = [mains.reference(b) for b in range(len(mains.full))]
+    return refs, _hists(refs, n, bins), [cKDTree(f) for f in refs]
+
+
 def merge_secondaries(paths: list[np.ndarray], mains: BranchSet, tau: float, n: int,
-                      bins: tuple[int, int, int]) -> list[tuple[np.ndarray, int, int]]:
-    """Algorithm 1, step 2: (segment, parent main branch, parent vertex) for each secondary path."""
+                      bins: tuple[int, int, int], references: tuple | None = None) -> list[tuple[np.ndarray, int, int]]:
+    """Algorithm 1, step 2: (segment, parent main branch, parent vertex) for each secondary path.
+    ``references``: ``main_references(mains, n, bins)``, when already computed."""
     if not paths:
         return []
-    refs = [mains.reference(b) for b in range(len(mains.full))]
+    refs, hm, trees = references if references is not None else main_references(mains, n, bins)
     ks = np.stack([merged_prefix(paths, f, tau) for f in refs], axis=1)  # (P, M)
-    hp, hm = _hists(paths, n, bins), _hists(refs, n, bins)
-    trees = [cKDTree(f) for f in refs]
+    hp = _hists(paths, n, bins)
     out = []
     for p, path in enumerate(paths):
         opt = choose_parent(ks[p], hp[p], hm)

@@ -29,7 +29,14 @@ from scipy.spatial import cKDTree
 from .graph import path_to, shortest_paths, weighted
 from .grid import BoxGrid
 from .lobes import RADIUS_STEPS, carved_hull, inside, plain_hull, plain_steps
-from .merge import BranchSet, centre_paths, merge_secondaries, resample_step, sample_polylines
+from .merge import (
+    BranchSet,
+    centre_paths,
+    main_references,
+    merge_secondaries,
+    resample_step,
+    sample_polylines,
+)
 from .options import DecomposeOptions
 from .smooth import smooth_polylines, vertex_limits
 from .state import LobeState
@@ -322,7 +329,9 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
     centres = [lb.centre for lb in lobes[len(others):]]
     _, pred = shortest_paths(weighted(adjacency, np.where(zone >= 0, ZONE_COST, 1.0)), root)
     targets = [int(g[np.argmin(np.linalg.norm(pts[g] - c, axis=1))]) for g, c in zip(groups, centres)]
-    merged = merge_secondaries(branch_paths(targets, pred, pts, grid, o.step), mains, tau, o.resample, o.sc_bins)
+    refs = main_references(mains, o.resample, o.sc_bins)
+    merged = merge_secondaries(branch_paths(targets, pred, pts, grid, o.step), mains, tau, o.resample, o.sc_bins,
+                               refs)
     raw = [_finish(seg, c) for (seg, _, _), c in zip(merged, centres)]
     tree = cKDTree(pts)
     smooth = smooth_polylines(raw, vertex_limits(raw, tree))
@@ -340,7 +349,7 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
         cost = np.where((zone >= 0) & (zone != j), FOREIGN_COST, np.where(zone == j, ZONE_COST, 1.0))
         _, p2 = shortest_paths(weighted(adjacency, cost), root)
         path = branch_paths([targets[j - len(others)]], p2, pts, grid, o.step)
-        seg, parent, pv = merge_secondaries(path, mains, tau, o.resample, o.sc_bins)[0]
+        seg, parent, pv = merge_secondaries(path, mains, tau, o.resample, o.sc_bins, refs)[0]
         seg = _finish(seg, lb.centre)
         smoothed = smooth_polylines([seg], vertex_limits([seg], tree))[0]
         seg = clear_smooth(lobes, j, seg, smoothed, o.step / 2, box, tree)
