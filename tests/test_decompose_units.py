@@ -563,3 +563,38 @@ def test_zone_sources_do_not_depend_on_the_order_of_the_lobe_points(rng):
     a, b = zone_sources(pts, members), zone_sources(pts, members[::-1])
     assert np.array_equal(a, b) and (a[200:] >= 0).all()
     assert (a[:200] % 100 == np.arange(200) % 100).all()  # a lobe point's nearest is itself or its copy
+
+
+def test_tetrahedra_without_blockers_match_a_tetrahedralisation_with_them(rng):
+    from scipy.spatial import Delaunay
+
+    from arboretum_server.decompose.lobes import Tetrahedra
+
+    # inserting points into a Delaunay tetrahedralisation removes exactly the tetrahedra whose
+    # circumsphere holds one: the survivors are the tetrahedra of own points in the joint one
+    for n in (30, 120, 400):
+        pts = rng.normal(0, 0.03, (n, 3))
+        blockers = np.linspace(-0.08, 0.08, 40)[:, None] * rng.normal(size=3) + rng.normal(0, 0.005, 3)
+        carved = Tetrahedra(pts).without(blockers)
+        kept = {tuple(t) for t in np.sort(carved.tets[np.isfinite(carved.radii)], axis=1)}
+        joint = Delaunay(np.vstack([pts, blockers])).simplices
+        own = {tuple(t) for t in np.sort(joint[(joint < n).all(axis=1)], axis=1)}
+        assert kept == own and 0 < len(kept) < len(carved.tets)
+
+
+def test_lobes_remember_their_tetrahedralisation_while_their_points_do(rng):
+    import gc
+
+    from arboretum_server.decompose import secondary
+    from arboretum_server.decompose.lobes import Tetrahedra
+
+    pts = rng.normal(0, 0.03, (200, 3))
+    members = np.arange(150)
+    tet = Tetrahedra(pts[members])
+    secondary.remember_plain(members, tet)
+    assert secondary._recall_plain(members) is tet
+    assert secondary._recall_plain(members.copy()) is None  # another array with the same points
+    key = id(members)
+    del members
+    gc.collect()
+    assert key not in secondary._PLAIN  # gone with the lobe's points

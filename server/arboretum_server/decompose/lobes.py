@@ -12,11 +12,12 @@ blocker points (main-branch wood a lobe wraps round, ``secondary.unwrap``).
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
 from numba import njit
-from scipy.spatial import ConvexHull, Delaunay, QhullError
+from scipy.spatial import ConvexHull, Delaunay, QhullError, cKDTree
 
 MIN_COVER = 0.95
 """Smallest fraction of a cluster's points the alpha shape must touch; otherwise the convex hull."""
@@ -37,8 +38,9 @@ def kmeans(points: np.ndarray, k: int, rng: np.random.Generator, init: np.ndarra
     return lab, km.cluster_centers_.astype(np.float64)
 
 
-def _circumradii(p: np.ndarray) -> np.ndarray:
-    """Circumradius (T,) of tetrahedra ``p`` (T, 4, 3); inf for flat ones.
+def _circumspheres(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Circumcentres (T, 3) and circumradii (T,) of tetrahedra ``p`` (T, 4, 3); inf radius (and nan
+    centre) for flat ones.
 
     Closed form: with a, b, c the edges from vertex 0, the circumcentre offset is
     (|a|^2 (b x c) + |b|^2 (c x a) + |c|^2 (a x b)) / (2 a . (b x c)).
@@ -49,22 +51,24 @@ def _circumradii(p: np.ndarray) -> np.ndarray:
     num = (a * a).sum(1)[:, None] * bc + (b * b).sum(1)[:, None] * ca + (c * c).sum(1)[:, None] * ab
     ok = np.abs(det) > 1e-18
     r = np.full(len(p), np.inf)
+    centre = np.full((len(p), 3), np.nan)
     r[ok] = np.linalg.norm(num[ok], axis=1) / np.abs(det[ok])
-    return r
+    centre[ok] = p[ok, 0] + num[ok] / det[ok, None]
+    return centre, r
 
 
 class Tetrahedra:
-    """The Delaunay tetrahedralisation of a cluster (and its blockers), the neighbours of every
-    tetrahedron and the circumradius of those made of the cluster's own points (inf where one touches a
-    blocker): built once, cut at as many probe radii as ``plain_hull`` and ``carved_hull`` try."""
+    """The Delaunay tetrahedralisation of a cluster's points with the neighbours and circumsphere of every
+    tetrahedron: built once, cut at as many probe radii as ``plain_hull`` and ``carved_hull`` try, and
+    carved (``without``) by as many sets of blockers."""
 
-    def __init__(self, points: np.ndarray, blockers: np.ndarray | None = None):
+    def __init__(self, points: np.ndarray):
+        self.points = np.asarray(points, dtype=np.float64)
         self.n_own = len(points)
-        self.carve = blockers is not None and len(blockers) > 0
-        self.points = np.vstack([points, blockers]) if self.carve else points
+        self.carve = False
         self.tets = np.zeros((0, 4), np.int32)
         self.neighbours = np.zeros((0, 4), np.int32)
-        self.radii = np.zeros(0)
+        self.radii, self.centres = np.zeros(0), np.zeros((0, 3))
         if self.n_own < 5:
             return
         try:
@@ -72,9 +76,22 @@ class Tetrahedra:
         except QhullError:
             return
         self.tets, self.neighbours = dt.simplices, dt.neighbors
-        self.radii = np.full(len(self.tets), np.inf)
-        own = (self.tets < self.n_own).all(axis=1)
-        self.radii[own] = _circumradii(self.points[self.tets[own]])
+        self.centres, self.radii = _circumspheres(self.points[self.tets])
+
+    def without(self, blockers: np.ndarray | None) -> Tetrahedra:
+        """The tetrahedra that stay when ``blockers`` (B, 3) join the tetrahedralisation and every
+        tetrahedron touching one is dropped: those whose circumsphere holds no blocker (inserting a point
+        into a Delaunay tetrahedralisation removes exactly the tetrahedra whose circumsphere holds it, and
+        every tetrahedron it adds touches it). The shapes of the result also drop pinched edges."""
+        if blockers is None or len(blockers) == 0 or not len(self.tets):
+            return self
+        out = copy.copy(self)
+        out.carve = True
+        live = np.flatnonzero(np.isfinite(self.radii))
+        near = cKDTree(np.asarray(blockers, dtype=np.float64)).query(self.centres[live])[0]
+        out.radii = self.radii.copy()
+        out.radii[live[near < self.radii[live]]] = np.inf
+        return out
 
     def shape(self, radius: float) -> tuple[np.ndarray, np.ndarray] | None:
         """The alpha shape at probe radius ``radius``, as ``alpha_shape`` returns it."""
@@ -106,12 +123,13 @@ def alpha_shape(points: np.ndarray, radius: float,
                 blockers: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray] | None:
     """Closed alpha shape (vertices (V, 3), outward faces (F, 3) int32) of ``points``, or None.
 
-    ``blockers`` (B, 3) join the Delaunay tetrahedralisation and every tetrahedron touching one is
-    dropped: the shape then reaches from its points up to, but not across, the blockers. The tunnel
+    With ``blockers`` (B, 3), the tetrahedra that would touch one if they joined the Delaunay
+    tetrahedralisation are dropped (``Tetrahedra.without``): the shape then reaches from its points up
+    to, but not across, the blockers. The tunnel
     this cuts often pinches the boundary (two tetrahedra meeting only along an edge); the tetrahedra at
     pinched edges are dropped too, for up to ``PINCH_ROUNDS`` rounds.
     """
-    return Tetrahedra(points, blockers).shape(radius)
+    return Tetrahedra(points).without(blockers).shape(radius)
 
 
 def _boundary(tets: np.ndarray, neighbours: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -203,28 +221,29 @@ def lobe_hull(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray
     return plain_hull(points, radius)[:3]
 
 
-def plain_hull(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray, bool, tuple[float, ...]]:
-    """``lobe_hull`` and the ``RADIUS_STEPS`` up to the one it used (all of them for a convex hull):
-    what ``plain_steps`` would compute again."""
+def plain_hull(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray, bool, tuple[float, ...], Tetrahedra]:
+    """``lobe_hull``, the ``RADIUS_STEPS`` up to the one it used (all of them for a convex hull): what
+    ``plain_steps`` would compute again, and the tetrahedralisation (for ``carved_hull``)."""
     tet = Tetrahedra(points)
     for i, step in enumerate(RADIUS_STEPS):
         shape = tet.shape(radius * step)
         if shape is not None and is_closed_manifold(shape[1]):
-            return shape[0], shape[1], True, RADIUS_STEPS[: i + 1]
+            return shape[0], shape[1], True, RADIUS_STEPS[: i + 1], tet
     v, f = convex_hull(points)
-    return v, f, False, RADIUS_STEPS
+    return v, f, False, RADIUS_STEPS, tet
 
 
 def carved_hull(points: np.ndarray, radius: float, blockers: np.ndarray | None,
-                steps: tuple[float, ...] = RADIUS_STEPS) -> tuple[np.ndarray, np.ndarray] | None:
+                steps: tuple[float, ...] = RADIUS_STEPS,
+                tet: Tetrahedra | None = None) -> tuple[np.ndarray, np.ndarray] | None:
     """(vertices (V, 3), outward faces (F, 3) int32): the first closed, one-piece alpha shape of
     ``points`` (N, 3) over the probe radii ``radius * steps`` that does not span ``blockers`` (B, 3) or
-    None (see ``alpha_shape``); None if there is none.
+    None (see ``alpha_shape``); None if there is none. ``tet``: ``Tetrahedra(points)``, when known.
 
     At one radius the carved shape lies inside the plain one: adding points to a Delaunay
     tetrahedralisation only removes tetrahedra among the old points, and carving only drops more.
     """
-    tet = Tetrahedra(points, blockers)
+    tet = (tet if tet is not None else Tetrahedra(points)).without(blockers)
     for step in steps:
         shape = tet.shape(radius * step)
         if shape is not None and is_closed_manifold(shape[1]):

@@ -20,6 +20,7 @@ path does not, the unsmoothed path is kept, so smoothing never adds a crossing.
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import replace
 
 import numpy as np
@@ -28,7 +29,7 @@ from scipy.spatial import cKDTree
 
 from .graph import path_to, shortest_paths, weighted
 from .grid import BoxGrid
-from .lobes import RADIUS_STEPS, carved_hull, inside, plain_hull, plain_steps
+from .lobes import RADIUS_STEPS, Tetrahedra, carved_hull, inside, plain_hull, plain_steps
 from .merge import (
     BranchSet,
     centre_paths,
@@ -224,6 +225,27 @@ def unwrap(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, ra
     return changed
 
 
+_PLAIN: dict[int, tuple[weakref.ref, Tetrahedra]] = {}
+"""The plain tetrahedralisation of each lobe, by the id of its ``members`` array, while that array lives
+(kept lobes share it across refinements; not part of ``LobeState``, so it never travels with one)."""
+
+
+def remember_plain(members: np.ndarray, tet: Tetrahedra) -> None:
+    """Keep ``tet`` (``Tetrahedra`` of the points ``members`` indexes) for ``carve_lobe`` while ``members`` lives."""
+    key = id(members)
+
+    def forget(ref: weakref.ref, key: int = key) -> None:
+        if _PLAIN.get(key, (None,))[0] is ref:
+            del _PLAIN[key]
+
+    _PLAIN[key] = (weakref.ref(members, forget), tet)
+
+
+def _recall_plain(members: np.ndarray) -> Tetrahedra | None:
+    hit = _PLAIN.get(id(members))
+    return hit[1] if hit is not None and hit[0]() is members else None
+
+
 def carve_lobe(lobes: list[LobeState], k: int, pts: np.ndarray, blockers: np.ndarray, radius: float) -> bool:
     """Rebuild lobe ``k``'s hull with the ``blockers`` (B, 3) within one probe radius of its points kept
     out, at most at its plain probe radius (in place); False when the carved shape is not usable."""
@@ -232,7 +254,7 @@ def carve_lobe(lobes: list[LobeState], k: int, pts: np.ndarray, blockers: np.nda
     lo, hi = members.min(axis=0) - radius, members.max(axis=0) + radius
     near = blockers[((blockers > lo) & (blockers < hi)).all(axis=1)]
     steps = lb.steps if lb.steps is not None else plain_steps(members, radius) if lb.alpha else RADIUS_STEPS
-    shape = carved_hull(members, radius, near, steps)
+    shape = carved_hull(members, radius, near, steps, _recall_plain(lb.members))
     if shape is None:
         return False
     lobes[k] = replace(lb, hull_vertices=shape[0], hull_faces=shape[1], alpha=True)
@@ -322,7 +344,8 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
         if old is not None:
             verts, faces, used_alpha, steps = old.hull_vertices, old.hull_faces, old.alpha, old.steps
         else:
-            verts, faces, used_alpha, steps = plain_hull(pts[g], o.alpha_radius)
+            verts, faces, used_alpha, steps, tet = plain_hull(pts[g], o.alpha_radius)
+            remember_plain(g, tet)
         lobes.append(LobeState(g, np.asarray(c, np.float64), verts, faces, used_alpha, np.zeros((0, 3)), -1, -1,
                                steps))
     part_overlaps(lobes, len(others), mains, pts, o.alpha_radius)
