@@ -264,11 +264,13 @@ def test_refinement_rejects_bad_requests(leaf_on):
         (lambda: refine.split_lobe(d, 0, [stroke, np.zeros((0, 3))]), "stroke 1"),
         (lambda: refine.split_lobe(d, 0, [stroke[:, :2], stroke[:, :2]]), "stroke 0"),
         (lambda: refine.split_lobe(d, 0, [stroke, stroke + 0.01], seed=-1), "seed"),
+        (lambda: refine.split_lobe(d, 0, [stroke, stroke + 0.01], seed=2.5), "seed"),
     ]
     for call, message in bad:
         with pytest.raises(InputError, match=message):
             call()
     assert len(refine.remove_lobe(d, np.int64(1)).lobes) == N_L - 1  # numpy integers are lobe numbers
+    assert len(refine.split_lobe(d, 0, [stroke, stroke + 0.01], seed=np.int64(3)).lobes) == N_L + 1  # and seeds
 
 
 def test_cli_stores_examples_and_saves_hbl(truth, tmp_path, capsys):
@@ -297,7 +299,7 @@ def test_cli_stores_examples_and_saves_hbl(truth, tmp_path, capsys):
         assert main(["decompose", str(scan), "--reach-weight", bad, "--library", str(lib)]) == 2
         assert "--reach-weight must lie in 0..1" in capsys.readouterr().err
     refused = {  # each refused before or during the work, with one line naming the input
-        ("--points", "10"): "downsampling to 10 points", ("--seed", "-1"): "--seed must not be negative",
+        ("--points", "10"): "--points 10 leaves too few points", ("--seed", "-1"): "--seed must not be negative",
         ("--height", "inf"): "--height must be a finite number", ("--lobes", "100000"): "lobes: 100000 asked",
         ("--main", "1000"): "main branches: 1000 asked", ("--save-hbl", str(tmp_path)): "is a folder",
         ("--save-hbl", str(tmp_path / "no" / "x.npz")): "folder that does not exist",
@@ -310,6 +312,13 @@ def test_cli_stores_examples_and_saves_hbl(truth, tmp_path, capsys):
     assert main(["decompose", str(scan), "--library", "/proc/arboretum-lib"]) == 2  # cannot be created
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "/proc/arboretum-lib" in err[0]
+    fresh = tmp_path / "fresh-lib"  # refused while decomposing: the library this run made is gone again
+    assert main(["decompose", str(scan), "--lobes", "100000", "--up", "z", "--library", str(fresh)]) == 2
+    assert "lobes: 100000 asked" in capsys.readouterr().err and not fresh.exists()
+    assert main(["decompose", str(scan), "--main", "4", "--lobes", "10", "--up", "z", "--library", str(lib),
+                 "--save-hbl", "/proc/arboretum-hbl.npz"]) == 2  # unwritable: nothing stored either
+    err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]  # after the progress line
+    assert len(err) == 1 and "--save-hbl /proc/arboretum-hbl.npz: cannot write it" in err[0]
     with Library.open(lib) as library:  # nothing stored by the refused runs
         assert sorted(library.ids()) == sorted(data["stored"])
     real_add, calls = Library.add, []
@@ -327,7 +336,10 @@ def test_cli_stores_examples_and_saves_hbl(truth, tmp_path, capsys):
         assert len(calls) == 3 and sorted(library.ids()) == sorted(data["stored"])
     assert main(["decompose", str(scan), "--species", "oak", "--up", "z", "--json"]) == 0
     notes = json.loads(capsys.readouterr().out)["notes"]
-    assert len(notes) == 1 and "'oak' is not in VRTree Table 2" in notes[0] and "N_l = 40" in notes[0]
+    assert len(notes) == 1 and "'oak' is not in VRTree Table 2" in notes[0] and "N_m = 8, N_l = 40" in notes[0]
+    assert main(["decompose", str(scan), "--species", "oak", "--main", "3", "--up", "z", "--json"]) == 0
+    notes = json.loads(capsys.readouterr().out)["notes"]
+    assert len(notes) == 1 and "N_l = 40 (the table's medians)" in notes[0] and "N_m" not in notes[0]
     assert main(["decompose", str(scan), "--main", "90", "--up", "z", "--json"]) == 0  # more than the tree has
     data = json.loads(capsys.readouterr().out)
     got = data["stats"]["main_branches"]

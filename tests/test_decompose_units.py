@@ -592,8 +592,9 @@ def test_lobes_remember_their_tetrahedralisation_while_their_points_do(rng):
     members = np.arange(150)
     tet = Tetrahedra(pts[members])
     secondary.remember_plain(members, tet)
-    assert secondary._recall_plain(members) is tet
-    assert secondary._recall_plain(members.copy()) is None  # another array with the same points
+    assert secondary._recall_plain(members, pts[members]) is tet
+    assert secondary._recall_plain(members.copy(), pts[members]) is None  # another array, the same points
+    assert secondary._recall_plain(members, pts[members] + 0.01) is None  # the same array over other points
     key = id(members)
     del members
     gc.collect()

@@ -10,8 +10,9 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import shutil
 import time
-from contextlib import ExitStack
+from contextlib import contextmanager
 
 from arboretum_library.cli import add_json_flag, emit
 
@@ -52,6 +53,10 @@ def _options(args: argparse.Namespace):
         raise InputError("--points must not be negative and --height must be a finite number >= 0")
     if args.seed < 0:
         raise InputError(f"--seed must not be negative, got {args.seed}")
+    least = DecomposeOptions().min_points
+    if 0 < args.points < least:
+        raise InputError(f"--points {args.points} leaves too few points to decompose a tree "
+                         f"(at least {least}, or 0 to keep all)")
     if args.reach_weight is not None and not 0.0 <= args.reach_weight <= 1.0:
         raise InputError(f"--reach-weight must lie in 0..1, got {args.reach_weight}")
     return DecomposeOptions(
@@ -61,54 +66,94 @@ def _options(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from arboretum_library.codec import save_record
-    from arboretum_library.errors import InputError
     from arboretum_library.pointio import ReadOptions, read_points
     from arboretum_library.progress import StatusLine
-
-    from .examples import counter_ids, make_examples, provenance
-    from .pipeline import decompose
 
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     options = _options(args)
     _check_output(args.save_hbl)
-    notes = _notes(options)
     t0 = time.perf_counter()
     cloud = read_points(args.scan, ReadOptions(up=args.up))
     t_read = time.perf_counter() - t0
     status = StatusLine() if not args.json else (lambda *a: None)
-    with ExitStack() as stack:
-        lib = None
-        if args.library:  # opened first: a library that cannot be written fails before the work
-            from arboretum_library.store import Library
-
-            lib = stack.enter_context(Library.open(args.library, create=True))
-        try:
-            dec = decompose(cloud.points, options, status, labels=cloud.labels)
-        except InputError as exc:
-            raise InputError(f"{args.scan}: {exc}") from None
-        prov = provenance(args.scan, options)
-        stored: list[str] = []
-        if lib is not None:
-            stem = os.path.splitext(os.path.basename(args.scan))[0]
-            try:
-                examples = make_examples(dec.hbl, prov, lambda: lib.new_id(stem), lambda e: stored.append(lib.add(e)))
-            except BaseException:  # Ctrl-C or a failed write: a tree is stored whole or not at all
-                for id_ in stored:
-                    lib.delete(id_)
-                raise
-        else:
-            examples = make_examples(dec.hbl, prov, counter_ids("example"))
-    if args.save_hbl:
-        save_record(args.save_hbl, dec.hbl)
+    with _library(args.library) as lib:  # opened first: a library that cannot be written fails before the work
+        dec = _decompose(args.scan, cloud, options, status)
+        if args.save_hbl:
+            _save_hbl(args.save_hbl, dec.hbl)
+        examples, stored = _store(lib, dec, args.scan, options)
     data = {
         "scan": args.scan, "points_read": len(cloud.points), "stats": dec.stats,
         "timing_s": {"read": t_read, **dec.timing}, "examples": [e.id for e in examples],
         "stored": stored, "library": str(args.library) if lib is not None else None, "hbl": args.save_hbl,
-        "options": options.as_dict(), "notes": notes + _shortfall(options, dec.stats),
+        "options": options.as_dict(), "notes": _notes(options) + _shortfall(options, dec.stats),
     }
     emit(args, data, _text(data))
     return 0
+
+
+@contextmanager
+def _library(path: str | None):
+    """The library at ``path`` (None: no library), created if missing; a library this run created is
+    removed again when the run fails (a refused scan leaves no empty library behind)."""
+    if not path:
+        yield None
+        return
+    from arboretum_library.store import Library
+
+    created = not os.path.exists(path)
+    try:
+        with Library.open(path, create=True) as lib:
+            yield lib
+    except BaseException:
+        if created:
+            shutil.rmtree(path, ignore_errors=True)
+        raise
+
+
+def _decompose(scan: str, cloud, options, status):
+    from arboretum_library.errors import InputError
+
+    from .pipeline import decompose
+
+    try:
+        return decompose(cloud.points, options, status, labels=cloud.labels)
+    except InputError as exc:
+        raise InputError(f"{scan}: {exc}") from None
+
+
+def _save_hbl(path: str, hbl) -> None:
+    from arboretum_library.codec import save_record
+    from arboretum_library.errors import InputError
+
+    try:
+        save_record(path, hbl)
+    except OSError as exc:
+        raise InputError(f"--save-hbl {path}: cannot write it ({exc.strerror or exc})") from None
+
+
+def _store(lib, dec, scan: str, options) -> tuple[list, list[str]]:
+    """(examples, ids stored): a tree goes into ``lib`` whole or not at all (Ctrl-C or a failed write
+    takes back every id this run handed out that made it into the library)."""
+    from .examples import counter_ids, make_examples, provenance
+
+    prov = provenance(scan, options)
+    if lib is None:
+        return make_examples(dec.hbl, prov, counter_ids("example")), []
+    stem = os.path.splitext(os.path.basename(scan))[0]
+    handed: list[str] = []
+    stored: list[str] = []
+
+    def new_id() -> str:
+        handed.append(lib.new_id(stem))
+        return handed[-1]
+
+    try:
+        return make_examples(dec.hbl, prov, new_id, lambda e: stored.append(lib.add(e))), stored
+    except BaseException:
+        for id_ in handed:
+            if id_ in lib:
+                lib.delete(id_)
+        raise
 
 
 def _check_output(path: str | None) -> None:
@@ -137,14 +182,14 @@ def _shortfall(options, stats: dict) -> list[str]:
 
 def _notes(options) -> list[str]:
     """What the run assumes that the user may not expect (printed with the result)."""
-    from .options import SPECIES_COUNTS
+    from .options import DEFAULT_COUNTS, SPECIES_COUNTS
 
-    if options.species in SPECIES_COUNTS or options.species == "unknown" or None not in (options.n_main,
-                                                                                          options.n_lobes):
+    missing = [f"{name} = {v}" for name, v, given in (("N_m", DEFAULT_COUNTS[0], options.n_main),
+                                                       ("N_l", DEFAULT_COUNTS[1], options.n_lobes)) if given is None]
+    if options.species in SPECIES_COUNTS or options.species == "unknown" or not missing:
         return []
-    n_m, n_l = options.counts()
     return [f"species '{options.species}' is not in VRTree Table 2 ({', '.join(SPECIES_COUNTS)}): "
-            f"N_m = {n_m}, N_l = {n_l} (the table's medians)"]
+            f"{', '.join(missing)} (the table's medians)"]
 
 
 def _text(d: dict) -> str:

@@ -211,8 +211,11 @@ def split_lobe(d: Decomposition, j: int, strokes: list[np.ndarray], seed: int = 
     t0 = time.perf_counter()
     lb = d.lobes[_lobe_index(d, j)]
     strokes = _strokes(strokes)
-    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
-        raise InputError(f"split lobe: the seed must be an integer >= 0, got {seed!r}")
+    try:
+        if isinstance(seed, bool) or operator.index(seed) < 0:
+            raise TypeError
+    except TypeError:
+        raise InputError(f"split lobe: the seed must be an integer >= 0, got {seed!r}") from None
     if len(strokes) < 2:
         raise InputError("split lobe: draw at least two strokes (one per new lobe)")
     if len(strokes) > len(lb.members):

@@ -241,9 +241,11 @@ def remember_plain(members: np.ndarray, tet: Tetrahedra) -> None:
     _PLAIN[key] = (weakref.ref(members, forget), tet)
 
 
-def _recall_plain(members: np.ndarray) -> Tetrahedra | None:
+def _recall_plain(members: np.ndarray, points: np.ndarray) -> Tetrahedra | None:
+    """The ``Tetrahedra`` remembered for ``members`` if it was built from ``points`` (its lobe's points)."""
     hit = _PLAIN.get(id(members))
-    return hit[1] if hit is not None and hit[0]() is members else None
+    ok = hit is not None and hit[0]() is members and np.array_equal(hit[1].points, points)
+    return hit[1] if ok else None
 
 
 def carve_lobe(lobes: list[LobeState], k: int, pts: np.ndarray, blockers: np.ndarray, radius: float) -> bool:
@@ -254,7 +256,7 @@ def carve_lobe(lobes: list[LobeState], k: int, pts: np.ndarray, blockers: np.nda
     lo, hi = members.min(axis=0) - radius, members.max(axis=0) + radius
     near = blockers[((blockers > lo) & (blockers < hi)).all(axis=1)]
     steps = lb.steps if lb.steps is not None else plain_steps(members, radius) if lb.alpha else RADIUS_STEPS
-    shape = carved_hull(members, radius, near, steps, _recall_plain(lb.members))
+    shape = carved_hull(members, radius, near, steps, _recall_plain(lb.members, members))
     if shape is None:
         return False
     lobes[k] = replace(lb, hull_vertices=shape[0], hull_faces=shape[1], alpha=True)
