@@ -507,6 +507,16 @@ def test_auto_keeps_z_when_unsure(tmp_path, rng):
     np.testing.assert_array_equal(cloud.points, pts)
 
 
+def test_up_axis_of_a_flat_disc(rng):
+    """A ground patch is flat: stood on its edge (the wrong axis) its footprint is a line, so it keeps its
+    own up axis either way (it used to be stood upright: its thin edge read as a narrow foot)."""
+    a, r = rng.uniform(0, 2 * np.pi, 20000), 5 * np.sqrt(rng.uniform(0, 1, 20000))
+    disc = np.c_[r * np.cos(a), r * np.sin(a), rng.normal(0, 0.02, 20000)]
+    assert guess_up_axis(disc)[0] == "z"
+    axis, confidence = guess_up_axis(zup_to_yup(disc))
+    assert axis == "y" and confidence > 0.99
+
+
 def test_up_axis_wide_crown(rng):
     """A tree much wider than tall still stands on Z (the narrow trunk decides)."""
     pts = _tree(rng, n_trunk=1500, crown_radius=1.0)

@@ -14,8 +14,9 @@ def guess_up_axis(points: np.ndarray) -> tuple[str, float]:
     For each candidate axis, an upright score: log(elongation) - 0.75 log(trunk / width), where
     elongation is the robust extent along the axis (0.5-99.5 percentile) over the crown width across it
     (2 x the 95th percentile distance from the median), and trunk is the same width measured in the lowest
-    10% of the extent. Trees are taller than wide and narrow at the foot. X is never a candidate; a tie
-    goes to Z. The confidence is a logistic of the score difference. See docs/scan-input.md for limits.
+    10% of the extent; an axis whose footprint is a line (thinner than ``SLAB_RATIO`` of its length: a
+    flat cloud stood on its edge) loses 4 log(ratio / SLAB_RATIO). Trees are taller than wide, narrow at the
+    foot and round in plan. X is never a candidate; a tie goes to Z. The confidence is a logistic of the score difference. See docs/scan-input.md for limits.
     """
     pts = np.asarray(points, dtype=np.float64)
     if len(pts) > 50_000:
@@ -23,6 +24,10 @@ def guess_up_axis(points: np.ndarray) -> tuple[str, float]:
     s_z, s_y = _upright_score(pts, 2), _upright_score(pts, 1)
     confidence = float(1.0 / (1.0 + np.exp(-2.0 * min(abs(s_z - s_y), 20.0))))
     return ("y" if s_y > s_z else "z"), confidence
+
+
+SLAB_RATIO = 0.1
+"""Footprint thinner than this fraction of its length: the cloud lies on its side along that axis."""
 
 
 def _upright_score(pts: np.ndarray, axis: int) -> float:
@@ -34,7 +39,14 @@ def _upright_score(pts: np.ndarray, axis: int) -> float:
     trunk = 2.0 * _spread(across[h <= lo + 0.1 * (hi - lo)])
     elongation = max(hi - lo, eps) / max(width, eps)
     narrow = min(max(trunk / max(width, eps), 0.01), 100.0)
-    return float(np.log(elongation) - 0.75 * np.log(narrow))
+    return float(np.log(elongation) - 0.75 * np.log(narrow) + 4.0 * np.log(_footprint(across, eps)))
+
+
+def _footprint(across: np.ndarray, eps: float) -> float:
+    """min(1, (thin / long extent of the footprint) / SLAB_RATIO): below 1 for a slab standing on its edge
+    (a ground disc read with the wrong up axis), whose footprint is a line; a crown's is round."""
+    ext = np.percentile(across, 99.5, axis=0) - np.percentile(across, 0.5, axis=0)
+    return min(1.0, max(float(ext.min()), eps) / max(float(ext.max()), eps) / SLAB_RATIO)
 
 
 def _spread(xy: np.ndarray, q: float = 95.0) -> float:
