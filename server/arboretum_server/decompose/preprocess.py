@@ -17,6 +17,9 @@ from .options import WORK_HEIGHT, DecomposeOptions
 
 BASE_BAND = 0.03
 """Height band (fraction of the tree height) whose points locate the trunk base."""
+BASE_MIN = 10
+"""The base band holds at least this many points (a flat cloud's lowest 3 % holds one or two, whose
+spread would read as a trunk's)."""
 MAX_BASE_SPREAD = 0.12
 """Largest 90th-percentile radius of the base band (fraction of height) that still is one trunk."""
 
@@ -88,6 +91,8 @@ def find_root(pts: np.ndarray) -> np.ndarray:
     z = pts[:, 2]
     h = np.ptp(z)
     base = pts[z < z.min() + BASE_BAND * h]
+    if len(base) < BASE_MIN:
+        base = pts[np.argsort(z)[:BASE_MIN]]
     lab, big = _base_clusters(base, h)
     trunk = base[lab == big[0]] if len(big) else base
     centre = np.median(trunk[:, :2], axis=0)
