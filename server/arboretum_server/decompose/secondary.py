@@ -67,9 +67,8 @@ def zone_sources(pts: np.ndarray, members: np.ndarray) -> np.ndarray:
 def zones(pts: np.ndarray, groups: list[np.ndarray], sources: np.ndarray | None = None) -> np.ndarray:
     """(N,) int32: the lobe whose points lie nearest each point within ZONE_RADIUS, -1 for none.
     ``sources``: ``zone_sources`` of the groups' union, when known."""
-    members = np.concatenate(groups).astype(np.int64) if groups else np.zeros(0, np.int64)
     if sources is None:
-        sources = zone_sources(pts, members)
+        sources = zone_sources(pts, np.concatenate(groups).astype(np.int64) if groups else np.zeros(0, np.int64))
     owner = np.full(len(pts), -1, np.int32)
     for j, g in enumerate(groups):
         owner[g] = j
