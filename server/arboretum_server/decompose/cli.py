@@ -44,6 +44,7 @@ def _options(args: argparse.Namespace):
     from arboretum_library.errors import InputError
 
     from .options import DecomposeOptions
+    from .preprocess import check_points
 
     for name in ("main", "lobes"):
         v = getattr(args, name)
@@ -53,16 +54,14 @@ def _options(args: argparse.Namespace):
         raise InputError("--points must not be negative and --height must be a finite number >= 0")
     if args.seed < 0:
         raise InputError(f"--seed must not be negative, got {args.seed}")
-    least = DecomposeOptions().min_points
-    if 0 < args.points < least:
-        raise InputError(f"--points {args.points} leaves too few points to decompose a tree "
-                         f"(at least {least}, or 0 to keep all)")
     if args.reach_weight is not None and not 0.0 <= args.reach_weight <= 1.0:
         raise InputError(f"--reach-weight must lie in 0..1, got {args.reach_weight}")
-    return DecomposeOptions(
+    options = DecomposeOptions(
         species=args.species.lower(), n_main=args.main, n_lobes=args.lobes, points=args.points,
         height=args.height or None, seed=args.seed, use_labels=not args.no_labels, reach_weight=args.reach_weight,
     )
+    check_points(options, "--points")  # before the scan is read
+    return options
 
 
 def run(args: argparse.Namespace) -> int:

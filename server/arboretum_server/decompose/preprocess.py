@@ -136,9 +136,7 @@ def prepare(
     labels: np.ndarray | None = None,
 ) -> Prepared:
     """Validate, remove ground, downsample to ``options.points`` and normalise. InputError on bad input."""
-    if 0 < options.points < options.min_points:
-        raise InputError(f"points: downsampling to {options.points} points leaves too few to decompose a tree "
-                         f"(at least {options.min_points}, or 0 to keep all)")
+    check_points(options)
     pts = validate(points, options)
     keep = np.isfinite(pts).all(axis=1)
     ground = ground_mask(pts[keep], options.ground_band)
@@ -159,6 +157,14 @@ def prepare(
             raise InputError(f"labels: {lab.shape[0]} labels for {len(pts)} points")
         lab = (lab[idx] > 0).astype(np.uint8)
     return Prepared((sub - root) * scale, idx, lab, root, scale, int(ground.sum()))
+
+
+def check_points(options: DecomposeOptions, name: str = "points") -> None:
+    """InputError when downsampling to ``options.points`` leaves too few points (``name``: the option's
+    name in the message, e.g. the command's ``--points``)."""
+    if 0 < options.points < options.min_points:
+        raise InputError(f"{name} {options.points} leaves too few points to decompose a tree "
+                         f"(at least {options.min_points}, or 0 to keep all)")
 
 
 POINTS_PER_LOBE = 10
