@@ -435,6 +435,28 @@ def test_main_fit_seen_treats_tied_lengths_as_interchangeable_and_skips_unseen_w
     assert np.isclose(main_fit_seen(per, np.array([1.0, 0.6, 0.5]), 2, 2.0), 0.025)  # 0.5 seen beats 0.18
 
 
+def test_a_thick_branch_scanned_on_its_surface_counts_as_seen(rng):
+    # a trunk of radius 0.05 (5 % of the height 1) scanned on its surface only: every scan point lies
+    # 0.05 from its axis, beyond SEEN_TOL; a thin branch beside it is scanned on its axis
+    from arboretum_library.model import HBL, Branch
+    from arboretum_server.decompose.evaluate import SEEN_TOL, branch_distances
+
+    assert SEEN_TOL < 0.05
+    a, z = rng.uniform(0, 2 * np.pi, 4000), rng.uniform(0, 1, 4000)
+    surface = np.c_[0.05 * np.cos(a), 0.05 * np.sin(a), z]
+    twig = np.c_[np.linspace(0.3, 0.6, 30), np.zeros(30), np.full(30, 0.5)]
+    axis = np.c_[np.zeros(11), np.zeros(11), np.linspace(0, 1, 11)]
+    hbl = HBL(np.zeros(3), (Branch(axis, np.full(11, 0.05)),))
+    scan = np.vstack([surface, twig])
+    trunk = [axis, twig]
+    radii = [np.full(11, 0.05), np.full(30, 0.001)]
+    (d0, seen0), (d1, seen1) = branch_distances(hbl, trunk, scan)
+    assert not seen0.any() and seen1.all()  # measured from the axis, the trunk is never seen
+    (d0, seen0), (d1, seen1) = branch_distances(hbl, trunk, scan, radii)
+    assert seen0.all() and seen1.all() and np.allclose(d0, 0.0)
+    assert np.isclose(d1.min(), 0.3, atol=1e-3)  # the twig's distance to the main branch is unchanged
+
+
 def test_part_overlaps_frees_a_centre_buried_in_a_neighbour(rng):
     # A user's selection (ball) taken out of a lobe wraps round it (a shell open towards +x): the shell's
     # alpha shape (probe 7.7 cm, larger than the shell) fills the hole and buries the ball's centre,

@@ -6,7 +6,8 @@ All distances are in the HBL's output frame; ``to_frame`` maps scan/truth coordi
   extracted main branch, as a fraction of tree height (target <= 0.02); ``main_fit_worst``: the worst
   single branch's mean.
 - ``main_fit_seen``: the same over what a scan can show: each true branch only where a scan point lies
-  within ``SEEN_TOL`` of it (a missing sector hides branches), ranked by that seen length, and true
+  within ``SEEN_TOL`` of the height of its surface, i.e. within its radius plus ``SEEN_TOL`` of its axis
+  (a missing sector hides branches), ranked by that seen length, and true
   branches whose lengths are within ``TIE`` of the N_m-th longest are interchangeable (the best of them
   fill the set). Where branches tie, "the N_m longest" is a matter of millimetres: on the harmonic pine
   the 5th to 7th longest first-order branches differ by 0.6 % of their length, less than one 1 cm vertex
@@ -32,6 +33,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from arboretum_library.geometry import polyline_lengths
 from arboretum_library.model import HBL, Level
 from arboretum_library.truth import TreeTruth, branch_polylines, polyline_length
 
@@ -40,7 +42,7 @@ from .merge import drop, resample_step, sample_polylines
 COVER_TOL = 0.01
 """Leaf cover tolerance at the 0.8 m scale."""
 SEEN_TOL = 0.01
-"""A true branch point is seen when a scan point lies within this fraction of the height of it."""
+"""A true branch point is seen when a scan point lies within this fraction of the height of its surface."""
 TIE = 0.05
 """True branch lengths within this fraction of the N_m-th longest's are interchangeable (``main_fit_seen``)."""
 CROSS_TOL = 0.002
@@ -143,16 +145,24 @@ def crossings(hbl: HBL) -> int:
     return bad
 
 
-def branch_distances(hbl: HBL, true_branches: list[np.ndarray], scan: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+def branch_distances(hbl: HBL, true_branches: list[np.ndarray], scan: np.ndarray,
+                     radii: list[np.ndarray] | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
     """For each true branch (in the HBL frame): (distances (M,) of its samples every height/500 to the
-    nearest main branch, seen (M,) bool: a ``scan`` point (P, 3) within ``SEEN_TOL`` of the height)."""
+    nearest main branch, seen (M,) bool: a ``scan`` point (P, 3) within ``SEEN_TOL`` of the height of
+    the branch's surface). ``radii``: each branch's radius per vertex in the same frame (None: 0, the
+    axis; a trunk thicker than ``SEEN_TOL`` of the height then never counts as seen)."""
     h = max(hbl.height, 1e-12)
     mains = cKDTree(sample_polylines([hbl.branches[i].points for i in hbl.by_level(Level.MAIN)], h / 500))
     seen = cKDTree(scan) if len(scan) else None
     out = []
-    for b in true_branches:
+    for j, b in enumerate(true_branches):
         q = resample_step(b, h / 500)
-        ok = seen.query(q)[0] <= SEEN_TOL * h if seen is not None else np.zeros(len(q), bool)
+        if seen is None:
+            ok = np.zeros(len(q), bool)
+        else:
+            s = polyline_lengths(b)
+            r = np.interp(np.linspace(0.0, s[-1], len(q)), s, radii[j]) if radii is not None else 0.0
+            ok = seen.query(q)[0] <= r + SEEN_TOL * h
         out.append((mains.query(q)[0], ok))
     return out
 
@@ -187,7 +197,9 @@ def evaluate(hbl: HBL, truth: TreeTruth, leaf_points: np.ndarray, to_frame: Call
     lengths = np.array([polyline_length(truth, p) for p in polys])
     branches = [to_frame(truth.positions[p]) for p in polys]
     scan = to_frame(np.asarray(scan_points, np.float64).reshape(-1, 3)) if scan_points is not None else None
-    per = branch_distances(hbl, branches, scan if scan is not None else np.concatenate(branches))
+    unit = float(np.linalg.norm(to_frame(np.eye(3)[:1]) - to_frame(np.zeros((1, 3)))))
+    radii = [truth.radii[p] * unit for p in polys]
+    per = branch_distances(hbl, branches, scan if scan is not None else np.concatenate(branches), radii)
     h = max(hbl.height, 1e-12)
     fit, worst = main_fit(per, np.argsort(-lengths)[:n_main], h)
     seen = main_fit_seen(per, lengths, n_main, h)
