@@ -139,6 +139,25 @@ def test_bad_input_raises_one_clear_input_error(truth, make, words):
         decompose(make(truth), OPTS)
 
 
+def test_a_branch_hanging_into_the_base_band_is_no_second_tree(truth):
+    # a weeping branch's leaves reach into the lowest 3 % of the cloud, 0.3 of the height from the trunk
+    # (the guiding elm through the virtual scanner, with 24,000 points or more, was refused as 2 trees)
+    pts = toy_scan(truth, 6000)[0]
+    z = pts[:, 2]
+    h, band = np.ptp(z), z < z.min() + 0.03 * np.ptp(z)
+    rng = np.random.default_rng(3)
+    n = band.sum() // 3
+    centre = np.median(pts[band, :2], axis=0) + [0.3 * h, 0.0]
+    clump = np.c_[centre + rng.normal(0, 0.003 * h, (n, 2)), z.min() + rng.uniform(0.015, 0.029, n) * h]
+    plain, hanging = decompose(pts, OPTS), decompose(np.vstack([pts, clump]), OPTS)
+    np.testing.assert_allclose(hanging.root_scan, plain.root_scan)
+    assert len(hanging.hbl.by_level(Level.MAIN)) == N_M
+    # a stem standing on the ground there is a second tree
+    stem = np.c_[centre + rng.normal(0, 0.003 * h, (3 * n, 2)), z.min() + rng.uniform(0.0, 0.1, 3 * n) * h]
+    with pytest.raises(InputError, match="2 separate trunks"):
+        decompose(np.vstack([pts, stem]), OPTS)
+
+
 def test_label_length_mismatch_is_an_input_error(truth):
     pts, lab = toy_scan(truth, n=3000)
     with pytest.raises(InputError, match="labels"):

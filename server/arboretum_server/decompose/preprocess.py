@@ -22,6 +22,10 @@ BASE_MIN = 10
 spread would read as a trunk's)."""
 MAX_BASE_SPREAD = 0.12
 """Largest 90th-percentile radius of the base band (fraction of height) that still is one trunk."""
+STANDING = 0.01
+"""A cluster of the base band stands on the ground (is a trunk) when its lowest point lies within this
+fraction of the height of the lowest cluster's; higher ones hang from the crown (a weeping branch's
+tips or leaves reaching into the band) and are no second tree."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -83,9 +87,11 @@ def ground_mask(pts: np.ndarray, band_frac: float) -> np.ndarray:
 
 
 def find_root(pts: np.ndarray) -> np.ndarray:
-    """(3,) trunk base of ``pts`` (N, 3): centre of the largest cluster in the lowest band, at its lowest z.
+    """(3,) trunk base of ``pts`` (N, 3): centre of the largest standing cluster in the lowest band, at its
+    lowest z.
 
-    InputError when the band holds several well-separated trunks, or when its largest cluster spreads
+    InputError when the band holds several well-separated trunks standing on the ground, or when its
+    largest standing cluster spreads
     too wide to be one trunk base.
     """
     z = pts[:, 2]
@@ -106,8 +112,9 @@ def find_root(pts: np.ndarray) -> np.ndarray:
 
 
 def _base_clusters(base: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
-    """Cluster labels of the base band (links shorter than 2 % of height) and the big clusters, largest
-    first. InputError when big clusters lie more than 10 % of the height apart (several trees)."""
+    """Cluster labels of the base band (links shorter than 2 % of height) and the big clusters that
+    stand on the ground (``STANDING``), largest first. InputError when standing big clusters lie more
+    than 10 % of the height apart (several trees)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
@@ -118,6 +125,9 @@ def _base_clusters(base: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
     sizes = np.bincount(lab)
     big = np.flatnonzero(sizes >= max(10, 0.1 * len(base)))
     big = big[np.argsort(-sizes[big])]
+    if len(big) >= 2:
+        low = np.array([base[lab == c, 2].min() for c in big])
+        big = big[low <= low.min() + STANDING * h]
     if len(big) >= 2:
         cents = np.array([np.median(base[lab == c], axis=0) for c in big])
         sep = np.linalg.norm(cents[:, None, :2] - cents[None, :, :2], axis=2).max()
