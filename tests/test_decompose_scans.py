@@ -85,8 +85,9 @@ def test_virtual_scanner_harmonic_species(species, case):
     assert f["leaf_cover"] >= 0.95
     assert f["crossings"] == 0
     assert f["main_fit"] <= (0.06 if species == "pine" or case == "sector" else 0.03)
-    # pine 0.0283 (0.058 before the spread term in main selection)
-    assert f["main_fit_seen"] <= (0.035 if species == "pine" else 0.025 if case == "sector" else 0.02)
+    # pine 0.013-0.020 (0.025-0.029 before "seen" was measured from the branch surface, 0.058 before
+    # the spread term in main selection); cherry sector 0.023
+    assert f["main_fit_seen"] <= (0.025 if species == "pine" or case == "sector" else 0.02)
     assert f["main_precision"] <= 0.01
 
 
