@@ -66,7 +66,7 @@ class DecomposeOptions:
     edge_power: float = 1.0
     """Main-branch routing uses edge length ** edge_power (1: the paper's Euclidean weights)."""
     leaf_edge_cost: float = 3.0
-    """Edge-weight factor for edges that touch leaf points when routing secondary branches to lobes."""
+    """Edge-weight factor for edges that touch leaf points when routing the main branches (wood preferred)."""
     ground_band: float = 0.015
     """Ground search band above the lowest point, as a fraction of the scan height (0.3 m of 20 m)."""
     use_labels: bool = True
