@@ -113,10 +113,10 @@ def test_refinements_of_a_pine_cross_no_lobe(species, seed, case, allowed):
     from arboretum_server.decompose.options import DecomposeOptions
     from arboretum_server.decompose.pipeline import decompose
     from arboretum_server.decompose.refine import insert_lobe, merge_lobes, split_lobe
-    from arboretum_server.decompose.report import CASES, _grow
+    from arboretum_server.decompose.report import CASES, grow_truth
     from arboretum_server.decompose.toytree import toy_scan
 
-    truth = _grow("harmonic", species, seed)
+    truth = grow_truth("harmonic", species, seed)
     pts, _ = toy_scan(truth, n=40000, noise=0.002 * float(np.ptp(truth.positions[:, 2])), seed=seed, **CASES[case])
     d = decompose(pts, DecomposeOptions(species=species))
     centres = np.array([lb.centre for lb in d.lobes])

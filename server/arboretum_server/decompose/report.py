@@ -79,7 +79,8 @@ def real_figures(scan: Path) -> dict:
     return out
 
 
-def _grow(model: str, species: str, seed: int):
+def grow_truth(model: str, species: str, seed: int):
+    """The sweeps' ground truth: a guiding-vector preset (``model`` 'guiding') or a harmonic species."""
     if model == "guiding":
         from arboretum_server.synth.guiding import grow_guiding
         from arboretum_server.synth.presets import preset
@@ -90,7 +91,9 @@ def _grow(model: str, species: str, seed: int):
     return grow_species(species, seed)
 
 
-def _virtual_scan(truth, case: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def virtual_scan(truth, case: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(points, labels) of the sweeps' virtual-scanner scan of ``truth``: 40,000 points, leaf-off, or a
+    70-degree missing sector, by ``case``."""
     from arboretum_server.synth.scanner import ScanOptions, scan
 
     opts = ScanOptions(points=40000, leaf_off=case == "leaf-off", missing_sector=70.0 if case == "sector" else 0.0)
@@ -99,10 +102,10 @@ def _virtual_scan(truth, case: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def synth_figures(species: str, seed: int, case: str, scanner: bool = False, model: str = "harmonic") -> dict:
-    truth = _grow(model, species, seed)
+    truth = grow_truth(model, species, seed)
     o = DecomposeOptions(species=species)
     if scanner:
-        pts, lab = _virtual_scan(truth, case, seed)
+        pts, lab = virtual_scan(truth, case, seed)
     else:
         pts, lab = toy_scan(truth, n=40000, noise=0.002 * float(np.ptp(truth.positions[:, 2])), seed=seed,
                             **CASES[case])
