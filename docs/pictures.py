@@ -422,6 +422,43 @@ def section_decomposition(work: Path) -> None:
     save(sheet(panels, 2), "decomp_synthetic_vs_truth.png")
 
 
+def section_main_fit(work: Path) -> None:
+    """The N_m longest true branches (blue) against the main branches decomposed from a virtual-scanner
+    scan (red): a guiding-vector tree, where they part, and a harmonic apple, where they agree."""
+    from arboretum_library.model import Level
+    from arboretum_library.truth import polyline_length
+    from arboretum_server.decompose.evaluate import evaluate
+    from arboretum_server.decompose.options import DecomposeOptions
+    from arboretum_server.decompose.pipeline import decompose as decompose_cloud
+    from arboretum_server.decompose.report import grow_truth, virtual_scan
+
+    panels = []
+    for model, species, name in (("guiding", "default", "guiding-vector tree (default preset)"),
+                                 ("harmonic", "apple", "harmonic apple")):
+        truth = grow_truth(model, species, 1)
+        pts, labels = virtual_scan(truth, "leaf-off", 1)
+        options = DecomposeOptions(species=species)
+        d = decompose_cloud(pts, options)
+
+        def to(p, d=d):
+            return d.to_output((p - d.root_scan) * d.scale)
+
+        n_main = options.counts()[0]
+        m = evaluate(d.hbl, truth, pts[labels == LEAF], to, *options.counts(), scan_points=pts)
+        polys = branch_polylines(truth)
+        longest = np.argsort([-polyline_length(truth, p) for p in polys])[:n_main]
+        r = 0.004 * d.hbl.height
+        items = [faint_points(to(pts[::2]), 1.5)]
+        items += [Polyline(points=f32(to(truth.positions[polys[i]])), radii=f32(np.full(len(polys[i]), r)),
+                           color=f32((0.15, 0.45, 0.95))) for i in longest]
+        items += [Polyline(points=f32(b.points), radii=f32(np.full(len(b.points), 0.6 * r)), color=f32((0.85, 0.1, 0.1)))
+                  for b in d.hbl.branches if b.level == Level.MAIN]
+        panels.append(label(render(with_grid(items), (640, 720), view=(-90.0, 5.0)),
+                            f"{name}, leaf-off, virtual scanner\n{n_main} longest true branches (blue), "
+                            f"{n_main} main branches (red)\nseen fit {m.main_fit_seen:.3f} of the height"))
+    save(sheet(panels, 2), "main_fit_chains.png")
+
+
 def section_growth_real(work: Path) -> None:
     """The coffee tree scan decomposed, then grown (twigs and leaves in its lobes)."""
     from arboretum_server.grow.options import GrowOptions
@@ -445,6 +482,7 @@ SECTIONS = {
     "concepts": [section_concepts],
     "synthetic": [section_synthetic],
     "decomposition": [section_decomposition],
+    "main-fit": [section_main_fit],
     "growth": [section_growth, section_growth_real],
     "modules": [section_modules],
 }
