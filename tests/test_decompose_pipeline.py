@@ -370,6 +370,21 @@ def test_cli_stores_examples_and_saves_hbl(truth, tmp_path, capsys):
                                           "merged into them (Algorithm 1)"]
 
 
+def test_a_cloud_of_foliage_only_gets_a_note(tmp_path, capsys):
+    # a tall Gaussian blob has a trunk base (its narrow lower tail) and decomposes, but 99.7 % of its
+    # points read as foliage: the branches have no wood to follow, and the user is told so
+    from arboretum_library.cli import main
+
+    blob = tmp_path / "blob.xyz"
+    np.savetxt(blob, np.random.default_rng(0).normal(size=(20000, 3)) * [1.0, 1.0, 3.0])
+    assert main(["decompose", str(blob), "--up", "z", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["stats"]["labels"] == "guessed" and data["stats"]["leaf_points"] >= 0.95 * data["stats"]["points"]
+    assert [n for n in data["notes"] if "are foliage (guessed labels) and almost none wood" in n]
+    assert main(["decompose", str(blob), "--up", "z"]) == 0  # the text output carries it too
+    assert "note: 100% of the points are foliage" in capsys.readouterr().out
+
+
 def test_virtual_scanner_leaf_off_tree_meets_the_floor():
     from arboretum_server.decompose.report import synth_figures
 

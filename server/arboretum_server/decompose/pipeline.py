@@ -176,6 +176,7 @@ def decompose(points: np.ndarray, options: DecomposeOptions = DecomposeOptions()
     lobe_of[fol] = k_lab
     stats = {
         "points": len(pts), "leaf_points": int((lab == LEAF).sum()), "ground_removed": prep.ground_removed,
+        "labels": "given" if prep.labels is not None else "guessed",
         "components": g.components, "bridges": g.bridges, "foliage_source": source,
         "main_branches": len(mains.segments), "lobes": len(lobes), "rerouted": rerouted,
         "alpha_shapes": sum(lb.alpha for lb in lobes), "hull_fallbacks": sum(not lb.alpha for lb in lobes),
