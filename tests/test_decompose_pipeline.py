@@ -152,10 +152,15 @@ def test_a_branch_hanging_into_the_base_band_is_no_second_tree(truth):
     plain, hanging = decompose(pts, OPTS), decompose(np.vstack([pts, clump]), OPTS)
     np.testing.assert_allclose(hanging.root_scan, plain.root_scan)
     assert len(hanging.hbl.by_level(Level.MAIN)) == N_M
-    # a stem standing on the ground there is a second tree
+    # a stem standing on the ground there is a second tree, and so is a stem as thick as the trunk
+    # standing 1.5 % of the height higher up a slope
     stem = np.c_[centre + rng.normal(0, 0.003 * h, (3 * n, 2)), z.min() + rng.uniform(0.0, 0.1, 3 * n) * h]
     with pytest.raises(InputError, match="2 separate trunks"):
         decompose(np.vstack([pts, stem]), OPTS)
+    uphill = np.c_[centre + rng.normal(0, 0.003 * h, (20 * n, 2)), z.min() + rng.uniform(0.015, 0.1, 20 * n) * h]
+    assert (uphill[:, 2] < z.min() + 0.03 * h).sum() > band.sum()  # more band points than the trunk's
+    with pytest.raises(InputError, match="2 separate trunks"):
+        decompose(np.vstack([pts, uphill]), OPTS)
 
 
 def test_label_length_mismatch_is_an_input_error(truth):

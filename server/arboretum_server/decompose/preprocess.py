@@ -23,9 +23,11 @@ spread would read as a trunk's)."""
 MAX_BASE_SPREAD = 0.12
 """Largest 90th-percentile radius of the base band (fraction of height) that still is one trunk."""
 STANDING = 0.01
-"""A cluster of the base band stands on the ground (is a trunk) when its lowest point lies within this
-fraction of the height of the lowest cluster's; higher ones hang from the crown (a weeping branch's
-tips or leaves reaching into the band) and are no second tree."""
+"""A big cluster of the base band whose lowest point lies more than this fraction of the height above
+the lowest cluster's, and that holds less than ``HANGING_SHARE`` of the largest cluster's points, hangs
+from the crown (a weeping branch's tips or leaves reaching into the band): it is no second tree."""
+HANGING_SHARE = 0.5
+"""See ``STANDING``: a raised cluster this large (a second trunk on a slope) still counts as a tree."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -112,8 +114,8 @@ def find_root(pts: np.ndarray) -> np.ndarray:
 
 
 def _base_clusters(base: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
-    """Cluster labels of the base band (links shorter than 2 % of height) and the big clusters that
-    stand on the ground (``STANDING``), largest first. InputError when standing big clusters lie more
+    """Cluster labels of the base band (links shorter than 2 % of height) and the big clusters that do
+    not hang from the crown (``STANDING``), largest first. InputError when two of those lie more
     than 10 % of the height apart (several trees)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
@@ -127,7 +129,8 @@ def _base_clusters(base: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
     big = big[np.argsort(-sizes[big])]
     if len(big) >= 2:
         low = np.array([base[lab == c, 2].min() for c in big])
-        big = big[low <= low.min() + STANDING * h]
+        hanging = (low > low.min() + STANDING * h) & (sizes[big] < HANGING_SHARE * sizes[big[0]])
+        big = big[~hanging]
     if len(big) >= 2:
         cents = np.array([np.median(base[lab == c], axis=0) for c in big])
         sep = np.linalg.norm(cents[:, None, :2] - cents[None, :, :2], axis=2).max()
