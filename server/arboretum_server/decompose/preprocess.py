@@ -23,11 +23,14 @@ spread would read as a trunk's)."""
 MAX_BASE_SPREAD = 0.12
 """Largest 90th-percentile radius of the base band (fraction of height) that still is one trunk."""
 STANDING = 0.01
-"""A big cluster of the base band whose lowest point lies more than this fraction of the height above
-the lowest cluster's, and that holds less than ``HANGING_SHARE`` of the largest cluster's points, hangs
-from the crown (a weeping branch's tips or leaves reaching into the band): it is no second tree."""
+"""A big cluster of the base band whose lowest point lies more than this fraction of the height above the
+lowest cluster's, and that holds fewer points per metre of height than ``HANGING_SHARE`` of the largest
+cluster's, hangs from the crown (a weeping branch's tips or leaves reaching into the band): it is no
+second tree."""
 HANGING_SHARE = 0.5
-"""See ``STANDING``: a raised cluster this large (a second trunk on a slope) still counts as a tree."""
+"""See ``STANDING``. Points are counted per metre between a cluster's lowest point and the band's top, so
+a second trunk up a slope, whose lower part the band cuts off, still counts as a tree (and a stray point
+under the trunk, which lowers the trunk's count, makes no other cluster hang)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -89,12 +92,10 @@ def ground_mask(pts: np.ndarray, band_frac: float) -> np.ndarray:
 
 
 def find_root(pts: np.ndarray) -> np.ndarray:
-    """(3,) trunk base of ``pts`` (N, 3): centre of the largest standing cluster in the lowest band, at its
-    lowest z.
+    """(3,) trunk base of ``pts`` (N, 3): centre of the largest cluster in the lowest band, at its lowest z.
 
-    InputError when the band holds several well-separated trunks standing on the ground, or when its
-    largest standing cluster spreads
-    too wide to be one trunk base.
+    InputError when the band holds several well-separated trunks (clusters hanging from the crown aside,
+    ``STANDING``), or when its largest cluster spreads too wide to be one trunk base.
     """
     z = pts[:, 2]
     h = np.ptp(z)
@@ -129,7 +130,8 @@ def _base_clusters(base: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
     big = big[np.argsort(-sizes[big])]
     if len(big) >= 2:
         low = np.array([base[lab == c, 2].min() for c in big])
-        hanging = (low > low.min() + STANDING * h) & (sizes[big] < HANGING_SHARE * sizes[big[0]])
+        dense = sizes[big] / np.maximum(base[:, 2].max() - low, 1e-9 * h)
+        hanging = (low > low.min() + STANDING * h) & (dense < HANGING_SHARE * dense[0])
         big = big[~hanging]
     if len(big) >= 2:
         cents = np.array([np.median(base[lab == c], axis=0) for c in big])
