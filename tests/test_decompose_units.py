@@ -457,6 +457,46 @@ def test_a_thick_branch_scanned_on_its_surface_counts_as_seen(rng):
     assert np.isclose(d1.min(), 0.3, atol=1e-3)  # the twig's distance to the main branch is unchanged
 
 
+def test_seen_follows_a_tapering_radius_along_uneven_vertices(rng):
+    # a cone (radius 0.2 at the base, 0 at the top) with its vertices bunched low, scanned on its
+    # surface: every sample is seen only if each gets the radius of its own height
+    from arboretum_library.model import HBL, Branch
+    from arboretum_server.decompose.evaluate import branch_distances
+
+    zs = np.array([0.0, 0.05, 0.1, 0.7, 0.72, 1.0])
+    radii = 0.2 * (1 - zs) + 1e-4
+    axis = np.c_[np.zeros(6), np.zeros(6), zs]
+    z, a = rng.uniform(0, 1, 20000), rng.uniform(0, 2 * np.pi, 20000)
+    surface = np.c_[0.2 * (1 - z) * np.cos(a), 0.2 * (1 - z) * np.sin(a), z]
+    hbl = HBL(np.zeros(3), (Branch(axis, radii),))
+    (_, seen), = branch_distances(hbl, [axis], surface, [radii])
+    assert seen.all()
+    (_, flipped), = branch_distances(hbl, [axis], surface, [radii[::-1]])
+    assert flipped.mean() < 0.8
+
+
+def test_evaluate_scales_true_radii_into_the_hbl_frame(rng):
+    # a trunk of radius 0.05 (height 1) scanned on its surface and a thin lateral branch scanned on its
+    # axis, 0.3 from the one main branch (the trunk); N_m = 1. The HBL frame is the truth's doubled:
+    # the trunk's surface lies 0.1 from its axis there, beyond 1 % of the height (0.02) plus the
+    # unscaled radius (0.05), so the trunk counts as seen only if its radius is doubled too
+    from arboretum_library.model import HBL, Branch
+    from arboretum_library.truth import TreeTruth
+    from arboretum_server.decompose.evaluate import evaluate
+
+    trunk = np.c_[np.zeros(11), np.zeros(11), np.linspace(0, 1, 11)]
+    side = np.c_[np.linspace(0.1, 0.3, 5), np.zeros(5), np.full(5, 0.5)]
+    truth = TreeTruth(positions=np.vstack([trunk, side]), radii=np.r_[np.full(11, 0.05), np.full(5, 0.002)],
+                      parent=np.r_[-1, np.arange(10), 5, np.arange(11, 15)].astype(np.int32),
+                      branch_id=np.r_[np.zeros(11), np.ones(5)].astype(np.int32),
+                      branch_order=np.r_[np.zeros(11), np.ones(5)].astype(np.int32))
+    a, z = rng.uniform(0, 2 * np.pi, 4000), rng.uniform(0, 1, 4000)
+    scan = np.vstack([np.c_[0.05 * np.cos(a), 0.05 * np.sin(a), z], np.c_[np.linspace(0.1, 0.3, 40), np.zeros(40), np.full(40, 0.5)]])
+    hbl = HBL(np.zeros(3), (Branch(2 * trunk, np.full(11, 0.1)),))
+    m = evaluate(hbl, truth, np.zeros((0, 3)), lambda p: 2 * p, 1, 0, scan_points=scan)
+    assert m.main_fit_seen == pytest.approx(0.0, abs=1e-12)  # the trunk is the seen branch, and it is found
+
+
 def test_part_overlaps_frees_a_centre_buried_in_a_neighbour(rng):
     # A user's selection (ball) taken out of a lobe wraps round it (a shell open towards +x): the shell's
     # alpha shape (probe 7.7 cm, larger than the shell) fills the hole and buries the ball's centre,

@@ -6,8 +6,8 @@ All distances are in the HBL's output frame; ``to_frame`` maps scan/truth coordi
   extracted main branch, as a fraction of tree height (target <= 0.02); ``main_fit_worst``: the worst
   single branch's mean.
 - ``main_fit_seen``: the same over what a scan can show: each true branch only where a scan point lies
-  within ``SEEN_TOL`` of the height of its surface, i.e. within its radius plus ``SEEN_TOL`` of its axis
-  (a missing sector hides branches), ranked by that seen length, and true
+  within ``SEEN_TOL`` of the height of its surface, i.e. within its radius plus ``SEEN_TOL`` x height of
+  its axis (a missing sector hides branches), ranked by that seen length, and true
   branches whose lengths are within ``TIE`` of the N_m-th longest are interchangeable (the best of them
   fill the set). Where branches tie, "the N_m longest" is a matter of millimetres: on the harmonic pine
   the 5th to 7th longest first-order branches differ by 0.6 % of their length, less than one 1 cm vertex
@@ -192,7 +192,8 @@ def main_precision(hbl: HBL, true_branches: list[np.ndarray]) -> float:
 def evaluate(hbl: HBL, truth: TreeTruth, leaf_points: np.ndarray, to_frame: Callable[[np.ndarray], np.ndarray],
              n_main: int, n_lobes: int, scan_points: np.ndarray | None = None) -> Metrics:
     """Metrics of ``hbl`` against ``truth``; ``leaf_points`` (L, 3), ``scan_points`` (P, 3) (all the
-    scan's points; None: every true point counts as seen) and the truth are in the scan frame."""
+    scan's points; None: every true point counts as seen) and the truth are in the scan frame.
+    ``to_frame`` must be a similarity (uniform scale): the true radii are scaled by its unit length."""
     polys = branch_polylines(truth)
     lengths = np.array([polyline_length(truth, p) for p in polys])
     branches = [to_frame(truth.positions[p]) for p in polys]
