@@ -21,7 +21,7 @@ UP_CHOICES = ("auto", "z", "y")
 ALL_LEAF = 0.95
 """A cloud with at least this fraction of foliage points gets a note: its branches have no wood to follow
 (the bundled real scans measure 2-37 % foliage, the synthetic test trees 1-70 %, a tall Gaussian blob
-99.7 %)."""
+99.8 %)."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -183,7 +183,7 @@ def _shortfall(options, stats: dict) -> list[str]:
         out.append(f"{stats['lobes']} lobes made, {n_l} asked: too few foliage points")
     leaf = stats["leaf_points"] / max(stats["points"], 1)
     if leaf >= ALL_LEAF:
-        out.append(f"{leaf:.0%} of the points are foliage ({stats['labels']} labels) and almost none wood: the "
+        out.append(f"{leaf:.1%} of the points are foliage ({stats['labels']} labels) and almost none wood: the "
                    "branches were routed through foliage and are a guess (is this one tree, with its trunk?)")
     return out
 
