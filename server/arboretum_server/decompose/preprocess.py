@@ -20,6 +20,17 @@ BASE_BAND = 0.03
 BASE_MIN = 10
 """The base band holds at least this many points (a flat cloud's lowest 3 % holds one or two, whose
 spread would read as a trunk's)."""
+GROUND_CELL = 0.02
+"""Ground search: the lowest point of each xy column this wide (fraction of the height) samples it."""
+GROUND_TILT = 0.5
+"""Steepest ground slope searched (rise over run: 27 degrees)."""
+GROUND_TRIES = 200
+"""RANSAC triples tried for the ground plane."""
+GROUND_WIDER = 3.0
+"""The ground spreads at least this many times wider than the trunk just above it."""
+GROUND_BELOW = 0.01
+"""At most this fraction of the points lies below the ground (a plane through the underside of a crown
+has the trunk below it)."""
 MAX_BASE_SPREAD = 0.12
 """Largest 90th-percentile radius of the base band (fraction of height) that still is one trunk."""
 STANDING = 0.01
@@ -67,28 +78,79 @@ def validate(points: np.ndarray, options: DecomposeOptions) -> np.ndarray:
     return pts
 
 
+def _spread(q: np.ndarray) -> float:
+    """Median distance of ``q`` (M, 3) from its median in plan view; inf for fewer than 5 points."""
+    if len(q) < 5:
+        return np.inf
+    return float(np.median(np.linalg.norm(q[:, :2] - np.median(q[:, :2], axis=0), axis=1)))
+
+
+def lowest_per_cell(pts: np.ndarray, cell: float) -> np.ndarray:
+    """The lowest point (M, 3) of ``pts`` (N, 3) in each ``cell`` x ``cell`` column of the xy plane."""
+    key = np.floor(pts[:, :2] / cell).astype(np.int64)
+    key = (key[:, 0] - key[:, 0].min()) * (int(np.ptp(key[:, 1])) + 1) + key[:, 1] - key[:, 1].min()
+    order = np.lexsort((pts[:, 2], key))
+    first = np.r_[True, key[order][1:] != key[order][:-1]]
+    return pts[order[first]]
+
+
+def ground_plane(pts: np.ndarray, band_frac: float) -> np.ndarray | None:
+    """(a, b, c) of the ground z = a x + b y + c under ``pts`` (N, 3), or None when there is none.
+
+    RANSAC (``GROUND_TRIES`` triples, a fixed seed) over the lowest point of every ``GROUND_CELL``
+    column: the plane, at most ``GROUND_TILT`` steep, that most of those lie within half of
+    ``band_frac`` of the height of, refitted by least squares to them.
+    """
+    h = float(np.ptp(pts[:, 2]))
+    low = lowest_per_cell(pts, GROUND_CELL * h)
+    if len(low) < 20:
+        return None
+    rng = np.random.default_rng(0)  # its own: the downsampling stream stays as it was
+    tol = band_frac * h / 2
+    best, best_n = None, 0
+    for _ in range(GROUND_TRIES):
+        a, b, c = low[rng.choice(len(low), 3, replace=False)]
+        n = np.cross(b - a, c - a)
+        norm = float(np.linalg.norm(n))
+        if norm == 0 or abs(n[2]) < norm / np.hypot(1.0, GROUND_TILT):
+            continue
+        k = int((np.abs((low - a) @ n) < tol * norm).sum())
+        if k > best_n:
+            best_n, best = k, (a, n / norm)
+    if best is None or best_n < 20:
+        return None
+    on = np.abs((low - best[0]) @ best[1]) < tol
+    coef, *_ = np.linalg.lstsq(np.c_[low[on, :2], np.ones(int(on.sum()))], low[on, 2], rcond=None)
+    return coef
+
+
 def ground_mask(pts: np.ndarray, band_frac: float) -> np.ndarray:
-    """(N,) bool: points of a ground disc under the trunk (none if the base is already narrow)."""
-    z = pts[:, 2]
-    z0, h = z.min(), np.ptp(z)
-    band = band_frac * h
+    """(N,) bool: points of the ground under the trunk, flat or sloped (none when there is no ground).
 
-    def spread(lo: float, hi: float) -> float:
-        sel = pts[(z >= lo) & (z < hi), :2]
-        if len(sel) < 5:
-            return 0.0
-        return float(np.percentile(np.linalg.norm(sel - np.median(sel, axis=0), axis=1), 90))
-
-    trunk = spread(z0 + 3 * band, z0 + 5 * band)
-    if trunk <= 0 or spread(z0, z0 + band) < 3 * trunk:
+    The ground is the plane of ``ground_plane``, when at most ``GROUND_BELOW`` of the points lie below
+    it and the points within half of ``band_frac`` of the height of it spread ``GROUND_WIDER`` times wider than the trunk (the narrowest of the slices
+    ``band_frac`` / 3 thick from ``band_frac`` to 6 ``band_frac`` above it: low branches widen some).
+    Removed: everything below the first slice from ``band_frac`` up that is trunk-wide again (at most
+    twice the trunk's spread), grass and a rough surface with it.
+    """
+    h = float(np.ptp(pts[:, 2]))
+    coef = ground_plane(pts, band_frac) if h > 0 else None
+    if coef is None:
         return np.zeros(len(pts), bool)
-    cut = z0 + band
-    for k in range(1, 30):  # climb until the slice is trunk-wide again
-        lo = z0 + k * band / 3
-        if spread(lo, lo + band / 3) < 2 * trunk:
-            cut = lo
-            break
-    return z < cut
+    up = pts[:, 2] - (pts[:, :2] @ coef[:2] + coef[2])  # height above the ground
+    step = band_frac * h / 3
+    near = np.flatnonzero((up > -step) & (up < 30 * step))
+    slab = np.floor(up[near] / step).astype(np.int64)
+
+    def spread(k: int) -> float:
+        return _spread(pts[near[slab == k]])
+
+    trunk = min(spread(k) for k in range(3, 18))
+    if ((up < -1.5 * step).sum() > GROUND_BELOW * len(pts) or not np.isfinite(trunk)
+            or _spread(pts[np.abs(up) < 1.5 * step]) < GROUND_WIDER * trunk):
+        return np.zeros(len(pts), bool)
+    cut = next((k for k in range(3, 30) if spread(k) < 2 * trunk), 3)
+    return up < cut * step
 
 
 def find_root(pts: np.ndarray) -> np.ndarray:
