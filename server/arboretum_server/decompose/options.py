@@ -68,7 +68,8 @@ class DecomposeOptions:
     leaf_edge_cost: float = 3.0
     """Edge-weight factor for edges that touch leaf points when routing the main branches (wood preferred)."""
     ground_band: float = 0.015
-    """Ground search band above the lowest point, as a fraction of the scan height (0.3 m of 20 m)."""
+    """Ground, as a fraction of the scan height (0.3 m of 20 m): points within half of it of the ground
+    plane sample the ground, and at least this much above the plane is cut (``preprocess.ground_mask``)."""
     use_labels: bool = True
     """Use leaf/wood labels given with the input instead of the separation heuristic."""
     leaf_dimension: float = 2.1

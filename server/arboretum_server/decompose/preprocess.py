@@ -127,11 +127,12 @@ def ground_plane(pts: np.ndarray, band_frac: float) -> np.ndarray | None:
 def ground_mask(pts: np.ndarray, band_frac: float) -> np.ndarray:
     """(N,) bool: points of the ground under the trunk, flat or sloped (none when there is no ground).
 
-    The ground is the plane of ``ground_plane``, when at most ``GROUND_BELOW`` of the points lie below
-    it and the points within half of ``band_frac`` of the height of it spread ``GROUND_WIDER`` times wider than the trunk (the narrowest of the slices
-    ``band_frac`` / 3 thick from ``band_frac`` to 6 ``band_frac`` above it: low branches widen some).
-    Removed: everything below the first slice from ``band_frac`` up that is trunk-wide again (at most
-    twice the trunk's spread), grass and a rough surface with it.
+    The ground is the plane of ``ground_plane`` when at most ``GROUND_BELOW`` of the points lie below it
+    and the points within half of ``band_frac`` of the height of it spread ``GROUND_WIDER`` times wider
+    than the trunk: the narrowest of the slices ``band_frac`` / 3 thick from ``band_frac`` to
+    6 ``band_frac`` above it (low branches widen some). Removed: everything below the first slice from
+    ``band_frac`` up that is trunk-wide again (at most twice the trunk's spread), grass and a rough
+    surface with it.
     """
     h = float(np.ptp(pts[:, 2]))
     coef = ground_plane(pts, band_frac) if h > 0 else None
