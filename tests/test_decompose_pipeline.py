@@ -124,6 +124,20 @@ def test_ground_is_removed_flat_or_sloped(truth, slope):
     assert np.linalg.norm(d.root_scan[:2]) < 0.2
 
 
+def test_two_trees_up_a_slope_are_refused(truth):
+    # the second tree stands 0.4 of the height up a 12 % slope, its foot 4.8 % of the height above the
+    # first's: the base band, measured from the lowest point, never held it (decomposed as one tree);
+    # measured from the ground plane it holds both feet
+    pts, _ = toy_scan(truth, leaf_fraction=0.0, seed=5)
+    z0, h = pts[:, 2].min(), np.ptp(pts[:, 2])
+    rng = np.random.default_rng(1)
+    xy = rng.uniform(-4, 4 + 0.4 * h, (8000, 2))
+    ground = np.c_[xy, z0 + 0.12 * xy[:, 0] + rng.uniform(-0.05, 0.05, 8000)]
+    second = pts + [0.4 * h, 0.0, 0.12 * 0.4 * h]
+    with pytest.raises(InputError, match="2 separate trunks"):
+        decompose(np.r_[pts, second, ground], OPTS)
+
+
 def test_no_ground_no_points_removed(truth, leaf_on):
     # the crown's underside holds planes too (the lowest point of each column under it): a plane
     # with the trunk below it is no ground

@@ -125,7 +125,12 @@ def ground_plane(pts: np.ndarray, band_frac: float) -> np.ndarray | None:
 
 
 def ground_mask(pts: np.ndarray, band_frac: float) -> np.ndarray:
-    """(N,) bool: points of the ground under the trunk, flat or sloped (none when there is no ground).
+    """(N,) bool: points of the ground under the trunk, flat or sloped (none when there is no ground)."""
+    return find_ground(pts, band_frac)[0]
+
+
+def find_ground(pts: np.ndarray, band_frac: float) -> tuple[np.ndarray, np.ndarray | None]:
+    """(N,) bool ground points of ``pts`` (N, 3), and the ground plane (a, b, c) or None when none.
 
     The ground is the plane of ``ground_plane`` when at most ``GROUND_BELOW`` of the points lie below it
     and the points within half of ``band_frac`` of the height of it spread ``GROUND_WIDER`` times wider
@@ -134,10 +139,11 @@ def ground_mask(pts: np.ndarray, band_frac: float) -> np.ndarray:
     ``band_frac`` up that is trunk-wide again (at most twice the trunk's spread), grass and a rough
     surface with it.
     """
+    none = np.zeros(len(pts), bool), None
     h = float(np.ptp(pts[:, 2]))
     coef = ground_plane(pts, band_frac) if h > 0 else None
     if coef is None:
-        return np.zeros(len(pts), bool)
+        return none
     up = pts[:, 2] - (pts[:, :2] @ coef[:2] + coef[2])  # height above the ground
     step = band_frac * h / 3
     near = np.flatnonzero((up > -step) & (up < 30 * step))
@@ -149,23 +155,27 @@ def ground_mask(pts: np.ndarray, band_frac: float) -> np.ndarray:
     trunk = min(spread(k) for k in range(3, 18))
     if ((up < -1.5 * step).sum() > GROUND_BELOW * len(pts) or not np.isfinite(trunk)
             or _spread(pts[np.abs(up) < 1.5 * step]) < GROUND_WIDER * trunk):
-        return np.zeros(len(pts), bool)
+        return none
     cut = next((k for k in range(3, 30) if spread(k) < 2 * trunk), 3)
-    return up < cut * step
+    return up < cut * step, coef
 
 
-def find_root(pts: np.ndarray) -> np.ndarray:
+def find_root(pts: np.ndarray, ground: np.ndarray | None = None) -> np.ndarray:
     """(3,) trunk base of ``pts`` (N, 3): centre of the largest cluster in the lowest band, at its lowest z.
 
+    The band is the lowest ``BASE_BAND`` of the height, measured from the ``ground`` plane (a, b, c) when
+    one was found (a second tree up the slope stands in it too), else from the lowest point.
     InputError when the band holds several well-separated trunks (clusters hanging from the crown aside,
     ``STANDING``), or when its largest cluster spreads too wide to be one trunk base.
     """
     z = pts[:, 2]
     h = np.ptp(z)
-    base = pts[z < z.min() + BASE_BAND * h]
-    if len(base) < BASE_MIN:
-        base = pts[np.argsort(z)[:BASE_MIN]]
-    lab, big = _base_clusters(base, h)
+    up = z if ground is None else z - (pts[:, :2] @ ground[:2] + ground[2])
+    band = np.flatnonzero(up < up.min() + BASE_BAND * h)
+    if len(band) < BASE_MIN:
+        band = np.argsort(up)[:BASE_MIN]
+    base = pts[band]
+    lab, big = _base_clusters(np.c_[base[:, :2], up[band]], h)
     trunk = base[lab == big[0]] if len(big) else base
     centre = np.median(trunk[:, :2], axis=0)
     r90 = float(np.percentile(np.linalg.norm(trunk[:, :2] - centre, axis=1), 90))
@@ -217,7 +227,7 @@ def prepare(
     check_points(options)
     pts = validate(points, options)
     keep = np.isfinite(pts).all(axis=1)
-    ground = ground_mask(pts[keep], options.ground_band)
+    ground, plane = find_ground(pts[keep], options.ground_band)
     idx = np.flatnonzero(keep)[~ground]
     if len(idx) < options.min_points:
         raise InputError(f"point cloud: only {len(idx)} points remain after removing the ground")
@@ -225,7 +235,7 @@ def prepare(
         idx = np.sort(rng.choice(idx, options.points, replace=False))
     sub = pts[idx]
     _check_counts(len(sub), options)
-    root = find_root(sub)
+    root = find_root(sub, plane)
     height = float(sub[:, 2].max() - root[2])
     scale = WORK_HEIGHT / height
     lab = None
