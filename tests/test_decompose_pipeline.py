@@ -138,6 +138,16 @@ def test_two_trees_up_a_slope_are_refused(truth):
         decompose(np.r_[pts, second, ground], OPTS)
 
 
+def test_ground_that_is_not_one_plane_is_named(truth):
+    # a ridge, falling 15 % both ways from the trunk: no plane fits, and the lowest 3 % of the cloud is
+    # two strips of ground, which were refused as "2 separate trunks"
+    pts, _ = toy_scan(truth, leaf_fraction=0.0, seed=5)
+    xy = np.random.default_rng(0).uniform(-4, 4, (6000, 2))
+    ridge = np.c_[xy, pts[:, 2].min() - 0.15 * np.abs(xy[:, 0])]
+    with pytest.raises(InputError, match="flat patches .* not trunks: ground that is not one plane"):
+        decompose(np.r_[pts, ridge], OPTS)
+
+
 def test_no_ground_no_points_removed(truth, leaf_on):
     # the crown's underside holds planes too (the lowest point of each column under it): a plane
     # with the trunk below it is no ground

@@ -26,6 +26,8 @@ GROUND_TILT = 0.5
 """Steepest ground slope searched (rise over run: 27 degrees)."""
 GROUND_TRIES = 200
 """RANSAC triples tried for the ground plane."""
+GROUND_SAMPLE = 5000
+"""RANSAC scores a plane on at most this many column minima (a wide scan has tens of thousands)."""
 GROUND_WIDER = 3.0
 """The ground spreads at least this many times wider than the trunk just above it."""
 GROUND_BELOW = 0.01
@@ -86,9 +88,11 @@ def _spread(q: np.ndarray) -> float:
 
 
 def lowest_per_cell(pts: np.ndarray, cell: float) -> np.ndarray:
-    """The lowest point (M, 3) of ``pts`` (N, 3) in each ``cell`` x ``cell`` column of the xy plane."""
-    key = np.floor(pts[:, :2] / cell).astype(np.int64)
-    key = (key[:, 0] - key[:, 0].min()) * (int(np.ptp(key[:, 1])) + 1) + key[:, 1] - key[:, 1].min()
+    """The lowest point (M, 3) of ``pts`` (N, 3) in each ``cell`` x ``cell`` column of the xy plane
+    (columns widened so that no axis holds more than 2 ** 20 of them)."""
+    cell = max(cell, float(np.ptp(pts[:, :2], axis=0).max()) / 2 ** 20, 1e-300)
+    key = np.floor((pts[:, :2] - pts[:, :2].min(axis=0)) / cell).astype(np.int64)
+    key = key[:, 0] * (int(key[:, 1].max()) + 1) + key[:, 1]
     order = np.lexsort((pts[:, 2], key))
     first = np.r_[True, key[order][1:] != key[order][:-1]]
     return pts[order[first]]
@@ -98,23 +102,25 @@ def ground_plane(pts: np.ndarray, band_frac: float) -> np.ndarray | None:
     """(a, b, c) of the ground z = a x + b y + c under ``pts`` (N, 3), or None when there is none.
 
     RANSAC (``GROUND_TRIES`` triples, a fixed seed) over the lowest point of every ``GROUND_CELL``
-    column: the plane, at most ``GROUND_TILT`` steep, that most of those lie within half of
-    ``band_frac`` of the height of, refitted by least squares to them.
+    column (scored on at most ``GROUND_SAMPLE`` of them): the plane, at most ``GROUND_TILT`` steep,
+    that most of those lie within half of ``band_frac`` of the height of, refitted by least squares to
+    all of them that do.
     """
     h = float(np.ptp(pts[:, 2]))
     low = lowest_per_cell(pts, GROUND_CELL * h)
     if len(low) < 20:
         return None
     rng = np.random.default_rng(0)  # its own: the downsampling stream stays as it was
+    some = low if len(low) <= GROUND_SAMPLE else low[rng.choice(len(low), GROUND_SAMPLE, replace=False)]
     tol = band_frac * h / 2
     best, best_n = None, 0
     for _ in range(GROUND_TRIES):
-        a, b, c = low[rng.choice(len(low), 3, replace=False)]
+        a, b, c = some[rng.choice(len(some), 3, replace=False)]
         n = np.cross(b - a, c - a)
         norm = float(np.linalg.norm(n))
         if norm == 0 or abs(n[2]) < norm / np.hypot(1.0, GROUND_TILT):
             continue
-        k = int((np.abs((low - a) @ n) < tol * norm).sum())
+        k = int((np.abs((some - a) @ n) < tol * norm).sum())
         if k > best_n:
             best_n, best = k, (a, n / norm)
     if best is None or best_n < 20:
@@ -145,7 +151,7 @@ def find_ground(pts: np.ndarray, band_frac: float) -> tuple[np.ndarray, np.ndarr
     if coef is None:
         return none
     up = pts[:, 2] - (pts[:, :2] @ coef[:2] + coef[2])  # height above the ground
-    step = band_frac * h / 3
+    step = band_frac * float(up.max()) / 3  # of the tree's height: a slope's rise is not the tree's
     near = np.flatnonzero((up > -step) & (up < 30 * step))
     slab = np.floor(up[near] / step).astype(np.int64)
 
@@ -209,12 +215,25 @@ def _base_clusters(base: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
     if len(big) >= 2:
         cents = np.array([np.median(base[lab == c], axis=0) for c in big])
         sep = np.linalg.norm(cents[:, None, :2] - cents[None, :, :2], axis=2).max()
+        if sep > 0.1 * h and any(_flat(base[lab == c], h) for c in big):
+            raise InputError(
+                f"point cloud: the lowest {BASE_BAND:.0%} of the cloud holds flat patches up to "
+                f"{sep:.3g} apart, not trunks: ground that is not one plane (a ridge, a hollow, a slope "
+                "over 27 degrees)? crop it away"
+            )
         if sep > 0.1 * h:
             raise InputError(
                 f"point cloud: {len(big)} separate trunks found {sep:.3g} apart at the base; "
                 "decompose one tree at a time"
             )
     return lab, big
+
+
+def _flat(cluster: np.ndarray, h: float) -> bool:
+    """A cluster of the base band that is a patch of ground: wider than half ``MAX_BASE_SPREAD`` of the
+    height ``h`` (no trunk is) and than twice its own height."""
+    r90 = float(np.percentile(np.linalg.norm(cluster[:, :2] - np.median(cluster[:, :2], axis=0), axis=1), 90))
+    return r90 > 0.5 * MAX_BASE_SPREAD * h and float(np.ptp(cluster[:, 2])) < 0.5 * r90
 
 
 def prepare(
