@@ -148,6 +148,15 @@ def test_ground_that_is_not_one_plane_is_named(truth):
         decompose(np.r_[pts, ridge], OPTS)
 
 
+def test_a_cloud_far_wider_than_tall_is_one_clear_error():
+    # 2 km across, 1e-17 high: the ground search's column keys (2 % of the height wide) overflowed
+    # int64, a FloatingPointError under the tests' error settings
+    rng = np.random.default_rng(0)
+    pts = np.c_[rng.uniform(-1e3, 1e3, (3000, 2)), rng.uniform(0, 1e-17, 3000)]
+    with pytest.raises(InputError, match="no trunk base"):
+        decompose(pts, OPTS)
+
+
 def test_no_ground_no_points_removed(truth, leaf_on):
     # the crown's underside holds planes too (the lowest point of each column under it): a plane
     # with the trunk below it is no ground
