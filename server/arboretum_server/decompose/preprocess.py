@@ -80,11 +80,14 @@ def validate(points: np.ndarray, options: DecomposeOptions) -> np.ndarray:
     return pts
 
 
+def _plan_radius(q: np.ndarray, percent: float) -> float:
+    """The ``percent``-th percentile of the plan-view distances of ``q`` (M, 3) from their median."""
+    return float(np.percentile(np.linalg.norm(q[:, :2] - np.median(q[:, :2], axis=0), axis=1), percent))
+
+
 def _spread(q: np.ndarray) -> float:
-    """Median distance of ``q`` (M, 3) from its median in plan view; inf for fewer than 5 points."""
-    if len(q) < 5:
-        return np.inf
-    return float(np.median(np.linalg.norm(q[:, :2] - np.median(q[:, :2], axis=0), axis=1)))
+    """Median plan-view distance of ``q`` (M, 3) from its median; inf for fewer than 5 points."""
+    return np.inf if len(q) < 5 else _plan_radius(q, 50)
 
 
 def lowest_per_cell(pts: np.ndarray, cell: float) -> np.ndarray:
@@ -130,13 +133,9 @@ def ground_plane(pts: np.ndarray, band_frac: float) -> np.ndarray | None:
     return coef
 
 
-def ground_mask(pts: np.ndarray, band_frac: float) -> np.ndarray:
-    """(N,) bool: points of the ground under the trunk, flat or sloped (none when there is no ground)."""
-    return find_ground(pts, band_frac)[0]
-
-
 def find_ground(pts: np.ndarray, band_frac: float) -> tuple[np.ndarray, np.ndarray | None]:
-    """(N,) bool ground points of ``pts`` (N, 3), and the ground plane (a, b, c) or None when none.
+    """(N,) bool ground points of ``pts`` (N, 3), flat or sloped, and the ground plane (a, b, c) or None
+    when there is no ground.
 
     The ground is the plane of ``ground_plane`` when at most ``GROUND_BELOW`` of the points lie below it
     and the points within half of ``band_frac`` of the height of it spread ``GROUND_WIDER`` times wider
@@ -184,7 +183,7 @@ def find_root(pts: np.ndarray, ground: np.ndarray | None = None) -> np.ndarray:
     lab, big = _base_clusters(np.c_[base[:, :2], up[band]], h)
     trunk = base[lab == big[0]] if len(big) else base
     centre = np.median(trunk[:, :2], axis=0)
-    r90 = float(np.percentile(np.linalg.norm(trunk[:, :2] - centre, axis=1), 90))
+    r90 = _plan_radius(trunk, 90)
     if r90 > MAX_BASE_SPREAD * h:
         raise InputError(
             f"point cloud: no trunk base found (the lowest {BASE_BAND:.0%} of the cloud spreads "
@@ -215,13 +214,13 @@ def _base_clusters(base: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
     if len(big) >= 2:
         cents = np.array([np.median(base[lab == c], axis=0) for c in big])
         sep = np.linalg.norm(cents[:, None, :2] - cents[None, :, :2], axis=2).max()
-        if sep > 0.1 * h and any(_flat(base[lab == c], h) for c in big):
-            raise InputError(
-                f"point cloud: the lowest {BASE_BAND:.0%} of the cloud holds flat patches up to "
-                f"{sep:.3g} apart, not trunks: ground that is not one plane (a ridge, a hollow, a slope "
-                "over 27 degrees)? crop it away"
-            )
         if sep > 0.1 * h:
+            if any(_flat(base[lab == c], h) for c in big):
+                raise InputError(
+                    f"point cloud: the lowest {BASE_BAND:.0%} of the cloud holds flat patches up to "
+                    f"{sep:.3g} apart, not trunks: ground that is not one plane (a ridge, a hollow, a "
+                    "slope over 27 degrees)? crop it away"
+                )
             raise InputError(
                 f"point cloud: {len(big)} separate trunks found {sep:.3g} apart at the base; "
                 "decompose one tree at a time"
@@ -232,7 +231,7 @@ def _base_clusters(base: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
 def _flat(cluster: np.ndarray, h: float) -> bool:
     """A cluster of the base band that is a patch of ground: wider than half ``MAX_BASE_SPREAD`` of the
     height ``h`` (no trunk is) and than twice its own height."""
-    r90 = float(np.percentile(np.linalg.norm(cluster[:, :2] - np.median(cluster[:, :2], axis=0), axis=1), 90))
+    r90 = _plan_radius(cluster, 90)
     return r90 > 0.5 * MAX_BASE_SPREAD * h and float(np.ptp(cluster[:, 2])) < 0.5 * r90
 
 
