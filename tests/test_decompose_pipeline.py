@@ -210,6 +210,31 @@ def test_a_branch_hanging_into_the_base_band_is_no_second_tree(truth):
             decompose(cloud, OPTS)
 
 
+def test_a_second_tree_standing_higher_is_named_in_a_note(truth, tmp_path, capsys):
+    # the tree's twin 0.3 of the height away with its foot 5 % of the height higher and no ground
+    # scanned: it never enters the base band (the probe: 135 of 135 such pairs decomposed without a
+    # word). The decomposition goes on, as before, but names the column it found
+    from arboretum_library.cli import main
+
+    pts = toy_scan(truth, 6000)[0]
+    h = np.ptp(pts[:, 2])
+    twin = decompose(np.vstack([pts, pts + [0.3 * h, 0.0, 0.05 * h]]), OPTS)
+    (dist, rise), = twin.stats["trunk_columns"]
+    assert abs(dist / h - 0.3) < 0.03 and abs(rise / h - 0.05) < 0.015
+    assert decompose(pts, OPTS).stats["trunk_columns"] == []
+    # a wide clump of leaves hanging there, or a thin twig, is no trunk column; a dense stem is one
+    rng = np.random.default_rng(3)
+    foot = np.median(pts[pts[:, 2] < pts[:, 2].min() + 0.03 * h, :2], axis=0) + [0.3 * h, 0.0]
+    for spread, n, found in ((0.02, 150, 0), (0.003, 40, 0), (0.003, 150, 1)):
+        stem = np.c_[foot + rng.normal(0, spread * h, (n, 2)), pts[:, 2].min() + rng.uniform(0.05, 0.15, n) * h]
+        assert len(decompose(np.vstack([pts, stem]), OPTS).stats["trunk_columns"]) == found
+    scan = tmp_path / "two.xyz"
+    np.savetxt(scan, np.vstack([pts, pts + [0.3 * h, 0.0, 0.05 * h]]))
+    assert main(["decompose", str(scan), "--up", "z", "--main", str(N_M), "--lobes", str(N_L)]) == 0
+    out = capsys.readouterr().out
+    assert f"note: 1 trunk-like column away from the trunk base ({dist:.3g} away with its foot {rise:.3g} higher" in out
+
+
 def test_label_length_mismatch_is_an_input_error(truth):
     pts, lab = toy_scan(truth, n=3000)
     with pytest.raises(InputError, match="labels"):

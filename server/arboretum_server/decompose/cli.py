@@ -185,6 +185,12 @@ def _shortfall(options, stats: dict) -> list[str]:
     if leaf >= ALL_LEAF:
         out.append(f"{leaf:.1%} of the points are foliage ({stats['labels']} labels) and almost none wood: the "
                    "branches were routed through foliage and are a guess (is this one tree, with its trunk?)")
+    cols = stats.get("trunk_columns", [])
+    if cols:
+        where = ", ".join(f"{d:.3g} away with its foot {z:.3g} higher" for d, z in cols[:3])
+        out.append(f"{len(cols)} trunk-like column{'s' if len(cols) > 1 else ''} away from the trunk base "
+                   f"({where}{', ...' if len(cols) > 3 else ''}; scan units): another tree? It was "
+                   "decomposed as part of this one; crop the scan to one tree if it is not")
     return out
 
 

@@ -13,6 +13,7 @@ import numpy as np
 
 from arboretum_library.errors import InputError
 
+from .columns import trunk_columns
 from .options import WORK_HEIGHT, DecomposeOptions
 
 BASE_BAND = 0.03
@@ -62,6 +63,9 @@ class Prepared:
     """Normalised units per scan unit."""
     ground_removed: int
     """Number of input points removed as ground."""
+    columns: tuple[tuple[float, float], ...] = ()
+    """(plan distance from the root, foot height above the root) in scan units of each trunk-like
+    column away from the root (``columns.trunk_columns``): another tree standing higher?"""
 
 
 def validate(points: np.ndarray, options: DecomposeOptions) -> np.ndarray:
@@ -254,6 +258,8 @@ def prepare(
     sub = pts[idx]
     _check_counts(len(sub), options)
     root = find_root(sub, plane)
+    up = sub[:, 2] if plane is None else sub[:, 2] - (sub[:, :2] @ plane[:2] + plane[2])
+    cols = trunk_columns(sub, root, up)
     height = float(sub[:, 2].max() - root[2])
     scale = WORK_HEIGHT / height
     lab = None
@@ -262,7 +268,7 @@ def prepare(
         if lab.shape[0] != len(pts):
             raise InputError(f"labels: {lab.shape[0]} labels for {len(pts)} points")
         lab = (lab[idx] > 0).astype(np.uint8)
-    return Prepared((sub - root) * scale, idx, lab, root, scale, int(ground.sum()))
+    return Prepared((sub - root) * scale, idx, lab, root, scale, int(ground.sum()), tuple(cols))
 
 
 def check_points(options: DecomposeOptions, name: str = "points") -> None:

@@ -1,0 +1,98 @@
+"""Trunk-like columns away from the root: a second tree standing higher than the first (ours).
+
+``preprocess.find_root`` refuses separate trunks in the lowest 3 % of the height. A second tree whose
+foot stands higher (up a slope with no ground scanned, on a bank) never enters that band and would be
+decomposed as part of the first. Here every foot (the lowest point of an xy cell, lower than its
+neighbours', in the lowest ``FOOT_TOP`` of the height) more than ``SEPARATE`` of the height from the
+root is followed upwards: a column that is as full, as narrow and nearly as dense as the root's own
+trunk column is reported. A drooping branch or a crown bent down to the ground can look the same, so
+the decomposition goes on and the command prints a note; it does not refuse.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+FOOT_CELL = 0.02
+"""Width of the xy cells whose lowest points are the candidate feet (fraction of the height)."""
+FOOT_TOP = 0.2
+"""Feet are searched below this fraction of the height above the ground (or the root)."""
+SEPARATE = 0.1
+"""A foot at least this fraction of the height from the root in plan view is another trunk's."""
+SPAN = 0.1
+"""Height of the column followed above a foot (fraction of the height), in ``SLABS`` slabs."""
+SLABS = 5
+FULL = 0.3
+"""Every slab of a trunk column holds at least this share of the root column's median slab."""
+DENSE = 0.5
+"""A trunk column holds at least this share of the root column's points."""
+NARROW = 0.7
+"""At least this share of the points within twice the column's radius lie within its radius."""
+
+
+def _column(tree, pts: np.ndarray, up: np.ndarray, xy: np.ndarray, foot: float, rho: float,
+            h: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points per slab (SLABS,) within ``rho`` of a column rising from height ``foot`` at ``xy`` (its
+    centre follows the points slab by slab), and those between ``rho`` and 2 ``rho`` (SLABS,)."""
+    core, ring = np.zeros(SLABS, np.int64), np.zeros(SLABS, np.int64)
+    centre = np.asarray(xy, np.float64)
+    for k in range(SLABS):
+        idx = np.asarray(tree.query_ball_point(centre, 2 * rho), np.int64)
+        lo = foot + k * SPAN * h / SLABS
+        idx = idx[(up[idx] >= lo) & (up[idx] < lo + SPAN * h / SLABS)]
+        d = np.linalg.norm(pts[idx, :2] - centre, axis=1)
+        core[k], ring[k] = int((d < rho).sum()), int((d >= rho).sum())
+        if core[k] >= 3:
+            centre = np.median(pts[idx[d < rho], :2], axis=0)
+    return core, ring
+
+
+def _feet(pts: np.ndarray, up: np.ndarray, h: float) -> np.ndarray:
+    """Indices of the lowest point of each ``FOOT_CELL`` xy cell that lies below ``FOOT_TOP`` of the
+    height ``h`` (``up`` (N,): heights above the root) and no higher than the lowest points of the 8
+    cells around it."""
+    from scipy.ndimage import minimum_filter
+
+    low = np.flatnonzero(up < FOOT_TOP * h)
+    if len(low) == 0:
+        return low
+    cell = max(FOOT_CELL * h, float(np.ptp(pts[low, :2], axis=0).max()) / 4096, 1e-300)
+    key = np.floor((pts[low, :2] - pts[low, :2].min(axis=0)) / cell).astype(np.int64)
+    grid = np.full(tuple(key.max(axis=0) + 1), np.inf)
+    np.minimum.at(grid, (key[:, 0], key[:, 1]), up[low])
+    is_min = grid == minimum_filter(grid, size=3, mode="constant", cval=np.inf)
+    lowest = up[low] == grid[key[:, 0], key[:, 1]]
+    return low[lowest & is_min[key[:, 0], key[:, 1]]]
+
+
+def trunk_columns(pts: np.ndarray, root: np.ndarray, up: np.ndarray) -> list[tuple[float, float]]:
+    """(plan distance from ``root`` (3,), height of the foot above the root) of each trunk-like column
+    of ``pts`` (N, 3) away from the root, nearest first. ``up`` (N,): each point's height above the
+    ground plane, or its z when there is none."""
+    from scipy.spatial import cKDTree
+
+    h = float(up.max() - up.min())
+    if h <= 0:
+        return []
+    plan = np.linalg.norm(pts[:, :2] - root[:2], axis=1)
+    near = (up < up.min() + 0.03 * h) & (plan < SEPARATE * h)
+    if near.sum() < 5:
+        return []
+    rho = max(1.5 * float(np.percentile(plan[near], 90)), 0.01 * h)
+    rise = up - float(up[near].min())  # height above the root
+    keep = np.flatnonzero(rise < (FOOT_TOP + SPAN) * h)
+    tree = cKDTree(pts[keep, :2])
+    core0, _ = _column(tree, pts[keep], rise[keep], root[:2], 0.0, rho, h)
+    if core0.sum() == 0:
+        return []
+    found: list[np.ndarray] = []
+    out = []
+    for i in _feet(pts, rise, h):
+        if plan[i] < SEPARATE * h or any(np.linalg.norm(pts[i, :2] - f) < 2 * rho for f in found):
+            continue
+        core, ring = _column(tree, pts[keep], rise[keep], pts[i, :2], float(rise[i]), rho, h)
+        if (core.min() >= FULL * np.median(core0) and core.sum() >= DENSE * core0.sum()
+                and core.sum() >= NARROW * (core.sum() + ring.sum())):
+            found.append(pts[i, :2])
+            out.append((float(plan[i]), float(rise[i])))
+    return sorted(out)
