@@ -463,6 +463,20 @@ def test_a_cloud_of_foliage_only_gets_a_note(tmp_path, capsys):
     assert f"note: {share:.1%} of the points are foliage" in capsys.readouterr().out and share < 0.9995
 
 
+def test_a_straight_line_gets_a_note(tmp_path, capsys):
+    # a pole 5 m tall and 1 cm thick has a trunk base and decomposes (its branches lie along it), which
+    # it did without a word
+    from arboretum_library.cli import main
+
+    rng = np.random.default_rng(0)
+    pole = tmp_path / "pole.xyz"
+    np.savetxt(pole, np.c_[rng.normal(0, 0.01, (6000, 2)), rng.uniform(0, 5, 6000)])
+    assert main(["decompose", str(pole), "--up", "z", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["stats"]["width_ratio"] < 0.01
+    assert [n for n in data["notes"] if n.startswith("the cloud is nearly a straight line")]
+
+
 def test_virtual_scanner_leaf_off_tree_meets_the_floor():
     from arboretum_server.decompose.report import synth_figures
 

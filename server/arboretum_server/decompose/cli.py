@@ -18,6 +18,8 @@ from arboretum_library.cli import add_json_flag, emit
 
 UP_CHOICES = ("auto", "z", "y")
 
+LINE = 0.03
+"""A cloud whose ``width_ratio`` is under this gets a note: it is a pole or a stick, not a tree."""
 ALL_LEAF = 0.95
 """A cloud with at least this fraction of foliage points gets a note: its branches have no wood to follow
 (the bundled real scans measure 2-37 % foliage, the synthetic test trees 1-70 %, a tall Gaussian blob
@@ -185,7 +187,10 @@ def _shortfall(options, stats: dict) -> list[str]:
     if leaf >= ALL_LEAF:
         out.append(f"{leaf:.1%} of the points are foliage ({stats['labels']} labels) and almost none wood: the "
                    "branches were routed through foliage and are a guess (is this one tree, with its trunk?)")
-    cols = stats.get("trunk_columns", [])
+    if stats["width_ratio"] < LINE:
+        out.append(f"the cloud is nearly a straight line (it spreads {stats['width_ratio']:.1%} as wide as it "
+                   "is long): there is no crown to decompose, and the branches lie along that line")
+    cols = stats["trunk_columns"]
     if cols:
         where = ", ".join(f"{d:.3g} away with its foot {z:.3g} higher" for d, z in cols[:3])
         out.append(f"{len(cols)} trunk-like column{'s' if len(cols) > 1 else ''} away from the trunk base "

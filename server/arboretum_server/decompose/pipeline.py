@@ -57,6 +57,14 @@ class _Clock:
         self.progress(STEPS.index(name) + 1, len(STEPS), f"decompose: {name}")
 
 
+def width_ratio(pts: np.ndarray) -> float:
+    """The spread (standard deviation) of ``pts`` (N, 3) across their principal axis over the spread
+    along it: 0.005-0.007 for a noisy straight line, 0.08 for the slender real pine (scan 10), 0.12 or
+    more for the other trees measured (session 7)."""
+    ev = np.linalg.eigvalsh(np.cov(pts.T))
+    return float(np.sqrt(max(ev[1], 0.0) / max(ev[2], 1e-300)))
+
+
 def main_clearance(mains, pts: np.ndarray, tau: float, tree: cKDTree) -> np.ndarray:
     """(N,) bool: points off the main branches' wood.
 
@@ -176,7 +184,7 @@ def decompose(points: np.ndarray, options: DecomposeOptions = DecomposeOptions()
     lobe_of[fol] = k_lab
     stats = {
         "points": len(pts), "leaf_points": int((lab == LEAF).sum()), "ground_removed": prep.ground_removed,
-        "trunk_columns": [list(c) for c in prep.columns],
+        "trunk_columns": [list(c) for c in prep.columns], "width_ratio": width_ratio(pts),
         "labels": "given" if prep.labels is not None else "guessed",
         "components": g.components, "bridges": g.bridges, "foliage_source": source,
         "main_branches": len(mains.segments), "lobes": len(lobes), "rerouted": rerouted,
