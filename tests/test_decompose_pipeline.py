@@ -235,6 +235,26 @@ def test_a_second_tree_standing_higher_is_named_in_a_note(truth, tmp_path, capsy
     assert f"note: 1 trunk-like column away from the trunk base ({dist:.3g} away with its foot {rise:.3g} higher" in out
 
 
+def test_weeping_leaves_on_the_ground_are_no_second_trunk(truth):
+    # a weeping branch's leaves reach the ground 0.3 of the height from the trunk, their lowest point
+    # only 0.4 % of the height above the trunk's (too low to hang by STANDING), spreading wider as
+    # they rise (2 m out per metre up): no trunk column rises from them. The guiding elm on a ground
+    # disc was refused as "2 separate trunks" in 8 of its 15 probe clouds, 1 now
+    pts = toy_scan(truth, 6000)[0]
+    z = pts[:, 2]
+    h, band = np.ptp(z), z < z.min() + 0.03 * np.ptp(z)
+    rng = np.random.default_rng(3)
+    centre = np.median(pts[band, :2], axis=0) + [0.3 * h, 0.0]
+    t = rng.uniform(0.004, 0.12, 100) * h
+    leaves = np.c_[centre + rng.normal(0, 1, (100, 2)) * (0.003 * h + 2 * (t - t.min()))[:, None], z.min() + t]
+    plain, weeping = decompose(pts, OPTS), decompose(np.vstack([pts, leaves]), OPTS)
+    np.testing.assert_allclose(weeping.root_scan, plain.root_scan)
+    # the same points standing as a column are a trunk
+    stem = np.c_[centre + rng.normal(0, 0.005 * h, (100, 2)), z.min() + t]
+    with pytest.raises(InputError, match="2 separate trunks"):
+        decompose(np.vstack([pts, stem]), OPTS)
+
+
 def test_label_length_mismatch_is_an_input_error(truth):
     pts, lab = toy_scan(truth, n=3000)
     with pytest.raises(InputError, match="labels"):

@@ -30,7 +30,7 @@ NARROW = 0.7
 """At least this share of the points within twice the column's radius lie within its radius."""
 
 
-def _column(tree, pts: np.ndarray, up: np.ndarray, xy: np.ndarray, foot: float, rho: float,
+def column(tree, pts: np.ndarray, up: np.ndarray, xy: np.ndarray, foot: float, rho: float,
             h: float) -> tuple[np.ndarray, np.ndarray]:
     """Points per slab (SLABS,) within ``rho`` of a column rising from height ``foot`` at ``xy`` (its
     centre follows the points slab by slab), and those between ``rho`` and 2 ``rho`` (SLABS,)."""
@@ -82,7 +82,7 @@ def trunk_columns(pts: np.ndarray, root: np.ndarray, up: np.ndarray) -> list[tup
     rise = up - float(up[near].min())  # height above the root
     keep = np.flatnonzero(rise < (FOOT_TOP + SPAN) * h)
     tree = cKDTree(pts[keep, :2])
-    core0, _ = _column(tree, pts[keep], rise[keep], root[:2], 0.0, rho, h)
+    core0, _ = column(tree, pts[keep], rise[keep], root[:2], 0.0, rho, h)
     if core0.sum() == 0:
         return []
     found: list[np.ndarray] = []
@@ -90,7 +90,7 @@ def trunk_columns(pts: np.ndarray, root: np.ndarray, up: np.ndarray) -> list[tup
     for i in _feet(pts, rise, h):
         if plan[i] < SEPARATE * h or any(np.linalg.norm(pts[i, :2] - f) < 2 * rho for f in found):
             continue
-        core, ring = _column(tree, pts[keep], rise[keep], pts[i, :2], float(rise[i]), rho, h)
+        core, ring = column(tree, pts[keep], rise[keep], pts[i, :2], float(rise[i]), rho, h)
         if (core.min() >= FULL * np.median(core0) and core.sum() >= DENSE * core0.sum()
                 and core.sum() >= NARROW * (core.sum() + ring.sum())):
             found.append(pts[i, :2])

@@ -34,6 +34,8 @@ GROUND_WIDER = 3.0
 GROUND_BELOW = 0.01
 """At most this fraction of the points lies below the ground (a plane through the underside of a crown
 has the trunk below it)."""
+GAPPY = 0.25
+"""A slab of a trunk's column holds at least this share of its fullest slab (``_no_column``)."""
 MAX_BASE_SPREAD = 0.12
 """Largest 90th-percentile radius of the base band (fraction of height) that still is one trunk."""
 STANDING = 0.01
@@ -184,7 +186,7 @@ def find_root(pts: np.ndarray, ground: np.ndarray | None = None) -> np.ndarray:
     if len(band) < BASE_MIN:
         band = np.argsort(up)[:BASE_MIN]
     base = pts[band]
-    lab, big = _base_clusters(np.c_[base[:, :2], up[band]], h)
+    lab, big = _base_clusters(np.c_[base[:, :2], up[band]], h, np.c_[pts[:, :2], up])
     trunk = base[lab == big[0]] if len(big) else base
     centre = np.median(trunk[:, :2], axis=0)
     r90 = _plan_radius(trunk, 90)
@@ -196,10 +198,11 @@ def find_root(pts: np.ndarray, ground: np.ndarray | None = None) -> np.ndarray:
     return np.array([centre[0], centre[1], trunk[:, 2].min()])
 
 
-def _base_clusters(base: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+def _base_clusters(base: np.ndarray, h: float, cloud: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Cluster labels of the base band (links shorter than 2 % of height) and the big clusters that do
-    not hang from the crown (``STANDING``), largest first. InputError when two of those lie more
-    than 10 % of the height apart (several trees)."""
+    not hang from the crown (``STANDING``, ``_no_column``; ``cloud`` (N, 3): the whole cloud), largest
+    first. InputError when two of those lie more than 10 % of the height apart (several
+    trees). ``base`` and ``cloud`` hold x, y and the height above the ground."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
@@ -214,6 +217,7 @@ def _base_clusters(base: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
         low = np.array([base[lab == c, 2].min() for c in big])
         dense = sizes[big] / np.maximum(base[:, 2].max() - low, 1e-9 * h)
         hanging = (low > low.min() + STANDING * h) & (dense < HANGING_SHARE * dense[0])
+        hanging |= _no_column(cloud, [base[lab == c] for c in big], h)
         big = big[~hanging]
     if len(big) >= 2:
         cents = np.array([np.median(base[lab == c], axis=0) for c in big])
@@ -230,6 +234,32 @@ def _base_clusters(base: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
                 "decompose one tree at a time"
             )
     return lab, big
+
+
+def _no_column(cloud: np.ndarray, clusters: list[np.ndarray], h: float) -> np.ndarray:
+    """(C,) bool: no trunk rises from the cluster of the base band (hanging leaves reaching the ground).
+
+    Each cluster's column (``columns.column``: within 1.5 times its 90th-percentile plan radius, up
+    ``columns.SPAN`` of the height ``h`` from its lowest point, in ``columns.SLABS`` slabs) is no
+    trunk when one of its slabs holds under ``GAPPY`` of its fullest and under ``columns.NARROW`` of
+    the column's points lie within its radius of the points within twice it. Each cluster is measured
+    on its own, so a denser neighbour does not make a tree hang. None hangs when the largest cluster
+    is wider than a trunk (``_flat``'s width).
+    """
+    from scipy.spatial import cKDTree
+
+    from .columns import NARROW, SPAN, column
+
+    out = np.zeros(len(clusters), bool)
+    if _plan_radius(clusters[0], 90) > 0.5 * MAX_BASE_SPREAD * h:  # the largest is no trunk: a crown
+        return out  # bent down to the ground, whose trunk would then hang
+    low = cloud[cloud[:, 2] < min(c[:, 2].min() for c in clusters) + (BASE_BAND + SPAN) * h]
+    tree = cKDTree(low[:, :2])
+    for k, c in enumerate(clusters):
+        rho = max(1.5 * _plan_radius(c, 90), 0.01 * h)
+        core, ring = column(tree, low, low[:, 2], np.median(c[:, :2], axis=0), float(c[:, 2].min()), rho, h)
+        out[k] = core.min() < GAPPY * core.max() and core.sum() < NARROW * (core.sum() + ring.sum())
+    return out
 
 
 def _flat(cluster: np.ndarray, h: float) -> bool:
