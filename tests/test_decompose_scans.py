@@ -100,15 +100,14 @@ def test_virtual_scanner_guiding_presets(preset, case):
     assert f["main_fit_seen"] <= 0.06 and f["main_precision"] <= 0.012
 
 
-@pytest.mark.parametrize(("species", "seed", "case", "allowed"),
-                         [("pine", 3, "leaf-off", []), ("pine", 1, "leaf-on", [("insert", 6), ("split", 6)])])
-def test_refinements_of_a_pine_cross_no_lobe(species, seed, case, allowed):
+@pytest.mark.parametrize(("species", "seed", "case"), [("pine", 3, "leaf-off"), ("pine", 1, "leaf-on")])
+def test_refinements_of_a_pine_cross_no_lobe(species, seed, case):
     # Every other lobe: insert its outer third (by distance from the axis) as a new lobe, merge it with
     # its nearest neighbour, split it in two. Before the lobe losing points was rebuilt, kept branches
     # running through new lobes were routed again and buried centres freed, 19 inserts, 19 merges and
-    # 9 splits of 85 each (these two pines, an apple and a cherry) crossed a lobe; now 1, 0 and 1, all
-    # lobe 6 of the leaf-on pine: the new lobe's branch starts inside lobes wrapped round the trunk
-    # that carving does not clear.
+    # 9 splits of 85 each (these two pines, an apple and a cherry) crossed a lobe; then 1, 0 and 1, all
+    # lobe 6 of the leaf-on pine, whose outer part lies behind the rest of the lobe (session 7:
+    # refine._behind_new); now none.
     from arboretum_server.decompose.evaluate import crossings
     from arboretum_server.decompose.options import DecomposeOptions
     from arboretum_server.decompose.pipeline import decompose
@@ -132,4 +131,4 @@ def test_refinements_of_a_pine_cross_no_lobe(species, seed, case, allowed):
                           ("merge", merge_lobes(d, [j, k])), ("split", split_lobe(d, j, strokes))):
             if crossings(out.hbl):
                 bad.append((name, j))
-    assert set(bad) <= set(allowed), bad
+    assert bad == []

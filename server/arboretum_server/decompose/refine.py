@@ -5,6 +5,9 @@ step 2 against the cached main branches; a kept lobe wrapped round the main bran
 must start is carved, ``secondary.unwrap``), then the radii and records. A lobe that loses points to
 ``insert_lobe`` is rebuilt like a new one (centre, hull, branch). A kept lobe's branch that would run
 through a new lobe is carved out of it (``_give_way``), or, when that fails, routed again with them.
+A new lobe's branch that no repair clears (it lies behind another new lobe: the outer part of a lobe,
+inserted or split off) is routed round the kept lobes alone, and the new lobes in its way are carved
+out of it (``_behind_new``).
 Lobes keep their order; new ones come last (a lobe that loses all its points is dropped). Point indices
 refer to ``Decomposition.points``; strokes are in the HBL's output frame.
 """
@@ -20,8 +23,17 @@ import numpy as np
 from arboretum_library.errors import InputError
 
 from .lobes import inside, kmeans
-from .merge import sample_polylines
-from .secondary import boxes, carve_lobe, foreign, make_lobes, zone_sources, zones
+from .merge import resample_step, sample_polylines
+from .secondary import (
+    bent_fallback,
+    boxes,
+    carve_lobe,
+    foreign,
+    make_lobes,
+    straight_fallback,
+    zone_sources,
+    zones,
+)
 from .state import Decomposition, LobeState, build_hbl
 
 ROUTE_ROUNDS = 3
@@ -74,7 +86,8 @@ def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], c
             t0: float, op: str, order: list[int] | None = None) -> Decomposition:
     """Route the new lobes over ``groups`` after ``kept`` and rebuild the records.
 
-    A kept lobe whose secondary branch would run through a new lobe is carved out of it, else routed
+    A new lobe's branch still crossing another new lobe carves its way through it (``_behind_new``); a
+    kept lobe whose secondary branch would run through a new lobe is carved out of it, else routed
     again with them.
     ``order`` (one slot per kept lobe and group, in that order) gives each lobe's place in the result.
     """
@@ -91,6 +104,7 @@ def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], c
         zone = zones(d.points, [lb.members for lb in kept] + groups, sources)
         lobes = make_lobes(groups, np.array(centres), d.points, d.adjacency, d.root_index, zone, d.mains,
                            d.grid, d.tau, d.options, tuple(kept), (None,) * (len(groups) - len(hulls)) + hulls)[0]
+        _behind_new(lobes, len(kept), d)
         cross = sorted(_crossing_new(lobes, len(kept), d.options.step / 2)) if rnd + 1 < ROUTE_ROUNDS else []
         if cross:  # the new lobes give way to the branches already there, if carving lets them
             _give_way(lobes, len(kept), cross, d.points, d.options.alpha_radius)
@@ -129,10 +143,59 @@ def _give_way(lobes: list[LobeState], n_kept: int, cross: list[int], pts: np.nda
     tree the user already has keeps its branches."""
     wood = sample_polylines([lobes[i].segment for i in cross], step)
     for k in range(n_kept, len(lobes)):
-        lo, hi = lobes[k].hull_vertices.min(axis=0), lobes[k].hull_vertices.max(axis=0)
-        near = wood[((wood > lo) & (wood < hi)).all(axis=1)]
-        if len(near) and inside(lobes[k].hull_vertices, lobes[k].hull_faces, near).any():
+        if _enters(lobes[k], wood):
             carve_lobe(lobes, k, pts, wood, radius)
+
+
+def _enters(lb: LobeState, wood: np.ndarray) -> bool:
+    """True if one of the points ``wood`` (W, 3) lies inside lobe ``lb``'s hull."""
+    lo, hi = lb.hull_vertices.min(axis=0), lb.hull_vertices.max(axis=0)
+    near = wood[((wood > lo) & (wood < hi)).all(axis=1)]
+    return bool(len(near) and inside(lb.hull_vertices, lb.hull_faces, near).any())
+
+
+def _behind_new(lobes: list[LobeState], n_kept: int, d: Decomposition, step: float = 0.0025) -> None:
+    """A new lobe (index >= ``n_kept``) whose own branch still crosses a lobe (no repair of ``make_lobes``
+    cleared it) gets the straight or bent repair among the kept lobes alone, and the other new lobes in
+    its way are carved out of it, when that clears it (in place; else nothing changes).
+
+    Such a lobe lies behind another new one: the outer part of a lobe that was inserted or split off,
+    with the part left between it and the main branches, so every route to it runs through that part.
+    The new lobes are rebuilt by this operation anyway, and carving never grows a hull, so no other
+    branch starts crossing.
+    """
+    tol = d.options.step / 2
+    for j in range(n_kept, len(lobes)):
+        if not foreign(lobes, j, lobes[j].segment, tol, boxes(lobes)):
+            continue
+        sub = [*lobes[:n_kept], lobes[j]]
+        route = straight_fallback(sub, n_kept, d.mains) or bent_fallback(sub, n_kept, d.mains, d.points)
+        if route is None:
+            continue
+        trial = list(lobes)
+        wood = sample_polylines([route[0]], step)
+        carved = [k for k in range(n_kept, len(lobes)) if k != j and _enters(trial[k], wood)
+                  and carve_lobe(trial, k, d.points, wood, d.options.alpha_radius)]
+        trial[j] = replace(trial[j], segment=route[0], parent=route[1], parent_vertex=route[2])
+        if not foreign(trial, j, route[0], tol, boxes(trial)) and not _entered(lobes, trial, carved, tol):
+            lobes[:] = trial
+
+
+def _entered(before: list[LobeState], after: list[LobeState], changed: list[int], tol: float) -> bool:
+    """True if a branch (sampled every ``tol``) enters one of the ``changed`` lobes' hulls in ``after``
+    where it stayed out of that lobe in ``before``: a hull carved again from its points keeps out of
+    the new blockers only, and may fill a tunnel cut before for another branch."""
+    segs = [resample_step(lb.segment, tol) for lb in after]
+    which = np.concatenate([np.full(len(s), i) for i, s in enumerate(segs)])
+    q = np.concatenate(segs)
+    for k in changed:
+        near = ((q > after[k].hull_vertices.min(axis=0)) & (q < after[k].hull_vertices.max(axis=0))).all(axis=1)
+        near &= which != k
+        now = set(which[near][inside(after[k].hull_vertices, after[k].hull_faces, q[near])])
+        was = set(which[near][inside(before[k].hull_vertices, before[k].hull_faces, q[near])])
+        if now - was:
+            return True
+    return False
 
 
 def _crossing_new(lobes: list[LobeState], n_kept: int, tol: float) -> set[int]:
