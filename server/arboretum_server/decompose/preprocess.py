@@ -227,7 +227,7 @@ def _base_clusters(base: np.ndarray, h: float, cloud: np.ndarray) -> tuple[np.nd
                 raise InputError(
                     f"point cloud: the lowest {BASE_BAND:.0%} of the cloud holds flat patches up to "
                     f"{sep:.3g} apart, not trunks: ground that is not one plane (a ridge, a hollow, a "
-                    "slope over 27 degrees)? crop it away"
+                    "slope over 27 degrees), or foliage lying on the ground? crop it away"
                 )
             raise InputError(
                 f"point cloud: {len(big)} separate trunks found {sep:.3g} apart at the base; "
