@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 
 import numpy as np
 import pytest
@@ -219,8 +220,11 @@ def test_a_second_tree_standing_higher_is_named_in_a_note(truth, tmp_path, capsy
     pts = toy_scan(truth, 6000)[0]
     h = np.ptp(pts[:, 2])
     twin = decompose(np.vstack([pts, pts + [0.3 * h, 0.0, 0.05 * h]]), OPTS)
-    (dist, rise), = twin.stats["trunk_columns"]
+    (col,) = twin.stats["trunk_columns"]
+    dist, rise, foot = col["distance"], col["rise"], np.array(col["foot"])
     assert abs(dist / h - 0.3) < 0.03 and abs(rise / h - 0.05) < 0.015
+    base = pts[np.argmin(pts[:, 2])] + [0.3 * h, 0.0, 0.05 * h]  # the twin's lowest point
+    assert np.linalg.norm(foot[:2] - base[:2]) < 0.05 * h and abs(foot[2] - base[2]) < 0.015 * h
     assert decompose(pts, OPTS).stats["trunk_columns"] == []
     # a wide clump of leaves hanging there, or a thin twig, is no trunk column; a dense stem is one
     rng = np.random.default_rng(3)
@@ -232,7 +236,9 @@ def test_a_second_tree_standing_higher_is_named_in_a_note(truth, tmp_path, capsy
     np.savetxt(scan, np.vstack([pts, pts + [0.3 * h, 0.0, 0.05 * h]]))
     assert main(["decompose", str(scan), "--up", "z", "--main", str(N_M), "--lobes", str(N_L)]) == 0
     out = capsys.readouterr().out
-    assert f"note: 1 trunk-like column away from the trunk base ({dist:.3g} away with its foot {rise:.3g} higher" in out
+    got = re.search(r"note: 1 trunk-like column away from the trunk base \(foot at x (\S+), y (\S+), (\S+) from "
+                    r"the trunk base and (\S+) higher; scan units\): another tree\?", out)
+    assert got and np.allclose([float(v) for v in got.groups()], [*foot[:2], dist, rise], atol=0.02 * h)
 
 
 def test_weeping_leaves_on_the_ground_are_no_second_trunk(truth):

@@ -11,6 +11,8 @@ the decomposition goes on and the command prints a note; it does not refuse.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 FOOT_CELL = 0.02
@@ -65,10 +67,20 @@ def _feet(pts: np.ndarray, up: np.ndarray, h: float) -> np.ndarray:
     return low[lowest & is_min[key[:, 0], key[:, 1]]]
 
 
-def trunk_columns(pts: np.ndarray, root: np.ndarray, up: np.ndarray) -> list[tuple[float, float]]:
-    """(plan distance from ``root`` (3,), height of the foot above the root) of each trunk-like column
-    of ``pts`` (N, 3) away from the root, nearest first. ``up`` (N,): each point's height above the
-    ground plane, or its z when there is none."""
+class Column(NamedTuple):
+    """A trunk-like column away from the root, in the units and frame of the points searched."""
+
+    foot: tuple[float, float, float]
+    """Its lowest point (x, y, z)."""
+    distance: float
+    """Plan-view distance of the foot from the root."""
+    rise: float
+    """Height of the foot above the root (above the ground plane when there is one)."""
+
+
+def trunk_columns(pts: np.ndarray, root: np.ndarray, up: np.ndarray) -> list[Column]:
+    """Each trunk-like column of ``pts`` (N, 3) away from ``root`` (3,), nearest first. ``up`` (N,):
+    each point's height above the ground plane, or its z when there is none."""
     from scipy.spatial import cKDTree
 
     h = float(up.max() - up.min())
@@ -94,5 +106,5 @@ def trunk_columns(pts: np.ndarray, root: np.ndarray, up: np.ndarray) -> list[tup
         if (core.min() >= FULL * np.median(core0) and core.sum() >= DENSE * core0.sum()
                 and core.sum() >= NARROW * (core.sum() + ring.sum())):
             found.append(pts[i, :2])
-            out.append((float(plan[i]), float(rise[i])))
+            out.append(Column(tuple(float(v) for v in pts[i]), float(plan[i]), float(rise[i])))
     return sorted(out)

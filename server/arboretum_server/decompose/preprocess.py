@@ -13,7 +13,7 @@ import numpy as np
 
 from arboretum_library.errors import InputError
 
-from .columns import trunk_columns
+from .columns import Column, trunk_columns
 from .options import WORK_HEIGHT, DecomposeOptions
 
 BASE_BAND = 0.03
@@ -65,9 +65,9 @@ class Prepared:
     """Normalised units per scan unit."""
     ground_removed: int
     """Number of input points removed as ground."""
-    columns: tuple[tuple[float, float], ...] = ()
-    """(plan distance from the root, foot height above the root) in scan units of each trunk-like
-    column away from the root (``columns.trunk_columns``): another tree standing higher?"""
+    columns: tuple[Column, ...] = ()
+    """Trunk-like columns away from the root, in the scan's frame and units (``columns.trunk_columns``):
+    another tree standing higher?"""
 
 
 def validate(points: np.ndarray, options: DecomposeOptions) -> np.ndarray:
