@@ -3,7 +3,7 @@
     .venv/bin/python docs/pictures.py                 # every section
     .venv/bin/python docs/pictures.py synthetic growth  # only these sections
 
-Sections: concepts, synthetic, decomposition, growth, modules. Every picture is rendered headless
+Sections: concepts, synthetic, decomposition, main-fit, several-trees, growth, modules. Every picture is rendered headless
 (EGL, Mesa llvmpipe) by arboretum_client's renderer from data this script makes with fixed seeds, so the
 same command gives the same pictures. Each file written is printed. Decompositions run the real command,
 ``arboretum decompose SCAN --library TMP --save-hbl TMP.npz``, in a temporary folder.
@@ -459,6 +459,59 @@ def section_main_fit(work: Path) -> None:
     save(sheet(panels, 2), "main_fit_chains.png")
 
 
+def section_several_trees(work: Path) -> None:
+    """Session 7's input checks: a second tree standing higher, named by its trunk column (orange), and
+    the weeping elm on sloped ground, whose leaves on the ground no longer read as a second trunk."""
+    from arboretum_library.model import Level
+    from arboretum_server.decompose.options import DecomposeOptions
+    from arboretum_server.decompose.pipeline import decompose as decompose_cloud
+    from arboretum_server.decompose.preprocess import find_ground
+    from arboretum_server.decompose.report import grow_truth, virtual_scan
+
+    def scan(model: str, species: str, seed: int) -> tuple[np.ndarray, float]:
+        pts, _ = virtual_scan(grow_truth(model, species, seed), "leaf-on", seed)
+        return pts - [*np.median(pts[pts[:, 2] < pts[:, 2].min() + 0.01 * np.ptp(pts[:, 2]), :2], axis=0),
+                      pts[:, 2].min()], float(np.ptp(pts[:, 2]))
+
+    first, h = scan("harmonic", "apple", 1)
+    second, _ = scan("harmonic", "apple", 2)
+    pair = np.r_[first, second + [0.4 * h, 0.0, 0.05 * h]]
+    d = decompose_cloud(pair, DecomposeOptions(species="apple"))
+
+    def to(p, d=d):
+        return d.to_output((np.asarray(p) - d.root_scan) * d.scale)
+
+    items = hbl_over_points(d.hbl, to(pair[::3])).items
+    for c in d.stats["trunk_columns"]:
+        foot = np.array(c["foot"])
+        line = to(np.stack([foot, foot + [0.0, 0.0, 0.25 * h]]))
+        items = (*items, Polyline(points=f32(line), radii=f32([0.012, 0.012]), color=f32((1.0, 0.55, 0.0, 1.0))))
+    note = d.stats["trunk_columns"][0] if d.stats["trunk_columns"] else None
+    panels = [label(render(with_grid(items), (640, 720), view=(-90.0, 8.0)),
+                    "two apples, the second 0.4 of the height away\nand 5 % higher, no ground: one HBL, "
+                    + (f"and a note:\ntrunk column {note['distance'] / h:.2f} of the height away (orange)"
+                       if note else "no note"))]
+
+    elm, h = scan("guiding", "elm", 1)
+    rng = np.random.default_rng(1)
+    xy = rng.uniform(-0.6, 0.6, (len(elm) // 4, 2)) * h
+    ground = np.c_[xy, 0.1 * xy[:, 0] + rng.normal(0, 0.003 * h, len(xy))]
+    cloud = np.r_[elm, ground]
+    d = decompose_cloud(cloud, DecomposeOptions(species="elm"))
+    cut, _ = find_ground(cloud, DecomposeOptions().ground_band)
+    r = 0.004 * d.hbl.height
+    items = [faint_points(to(cloud[d.source_index[::2]], d), 1.5),
+             PointSet(points=f32(to(cloud[cut][::4], d)), colors=f32(np.broadcast_to((0.62, 0.5, 0.3), (len(cloud[cut][::4]), 3))),
+                      size_px=2.0)]
+    items += [Polyline(points=f32(b.points), radii=f32(np.full(len(b.points), r)), color=f32((0.85, 0.1, 0.1)))
+              for b in d.hbl.branches if b.level == Level.MAIN]
+    panels.append(label(render(with_grid(items), (640, 720), view=(-90.0, 8.0)),
+                        f"guiding elm on a 10 % slope: {d.stats['ground_removed']:,} ground points\nremoved (brown), "
+                        f"{len(d.hbl.by_level(Level.MAIN))} main branches (red) from the trunk base;\nits weeping leaves on "
+                        "the ground no longer read\nas a second trunk"))
+    save(sheet(panels, 2), "several_trees.png")
+
+
 def section_growth_real(work: Path) -> None:
     """The coffee tree scan decomposed, then grown (twigs and leaves in its lobes)."""
     from arboretum_server.grow.options import GrowOptions
@@ -483,6 +536,7 @@ SECTIONS = {
     "synthetic": [section_synthetic],
     "decomposition": [section_decomposition],
     "main-fit": [section_main_fit],
+    "several-trees": [section_several_trees],
     "growth": [section_growth, section_growth_real],
     "modules": [section_modules],
 }
