@@ -651,3 +651,36 @@ def test_lobes_remember_their_tetrahedralisation_while_their_points_do(rng):
     del members
     gc.collect()
     assert key not in secondary._PLAIN  # gone with the lobe's points
+
+
+@pytest.mark.parametrize(("kind", "off"), [("column", None), ("wide", "NARROW"), ("gappy", "FULL"), ("sparse", "FULL")])
+def test_trunk_columns_need_a_full_narrow_dense_column(monkeypatch, kind, off):
+    # a 10 m tree with a 3 m bare trunk of radius 0.1 and, 3 m away, a column standing 0.5 m higher:
+    # a trunk like it (found); the same with a ring of as many points 0.25 m round it (not narrow); with
+    # a 0.25 m gap, or with 550 points instead of 1500 (not full). Each fails its own criterion:
+    # with that one switched off, it is found
+    from arboretum_server.decompose import columns
+
+    rng = np.random.default_rng(0)
+
+    def trunk(n, r=0.1, x=0.0, z0=0.0, gap=(0.0, 0.0)):
+        z = rng.uniform(z0, 3.0, n)
+        z = z[(z < gap[0]) | (z > gap[1])]
+        a = rng.uniform(0, 2 * np.pi, len(z))
+        return np.c_[x + r * np.cos(a), r * np.sin(a), z]
+
+    root = trunk(1500)
+    crown = np.c_[rng.normal(0, 1.5, (4000, 2)), rng.uniform(3, 10, 4000)]
+    other = {"column": lambda: trunk(1500, x=3, z0=0.5),
+             "wide": lambda: np.r_[trunk(1500, x=3, z0=0.5), trunk(1500, r=0.25, x=3, z0=0.55)],
+             "gappy": lambda: trunk(1500, x=3, z0=0.5, gap=(0.8, 1.05)),
+             "sparse": lambda: trunk(550, x=3, z0=0.5)}[kind]()
+    pts = np.r_[root, crown, other]
+    found = columns.trunk_columns(pts, np.zeros(3), pts[:, 2])
+    if off is None:
+        (col,) = found
+        assert abs(col.distance - 3.0) < 0.11 and abs(col.rise - 0.5) < 0.01 and abs(col.foot[0] - 3.0) < 0.11
+        return
+    assert found == []
+    monkeypatch.setattr(columns, off, 0.0)
+    assert len(columns.trunk_columns(pts, np.zeros(3), pts[:, 2])) == 1

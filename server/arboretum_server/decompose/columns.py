@@ -4,8 +4,8 @@
 foot stands higher (up a slope with no ground scanned, on a bank) never enters that band and would be
 decomposed as part of the first. Here every foot (the lowest point of an xy cell, lower than its
 neighbours', in the lowest ``FOOT_TOP`` of the height) more than ``SEPARATE`` of the height from the
-root is followed upwards: a column that is as full, as narrow and nearly as dense as the root's own
-trunk column is reported. A drooping branch or a crown bent down to the ground can look the same, so
+root is followed upwards: a column whose every slab holds most of what a slab of the root's own
+trunk column holds (``FULL``), and whose points lie within its radius (``NARROW``), is reported. A drooping branch or a crown bent down to the ground can look the same, so
 the decomposition goes on and the command prints a note; it does not refuse.
 """
 
@@ -18,16 +18,17 @@ import numpy as np
 FOOT_CELL = 0.02
 """Width of the xy cells whose lowest points are the candidate feet (fraction of the height)."""
 FOOT_TOP = 0.2
-"""Feet are searched below this fraction of the height above the ground (or the root)."""
+"""Feet are searched below this fraction of the height above the root's foot."""
 SEPARATE = 0.1
 """A foot at least this fraction of the height from the root in plan view is another trunk's."""
 SPAN = 0.1
 """Height of the column followed above a foot (fraction of the height), in ``SLABS`` slabs."""
 SLABS = 5
-FULL = 0.3
-"""Every slab of a trunk column holds at least this share of the root column's median slab."""
-DENSE = 0.5
-"""A trunk column holds at least this share of the root column's points."""
+RECENTRE = 2
+"""Times the first slab of a column is recentred on its points before it counts."""
+FULL = 0.6
+"""Every slab of a trunk column holds at least this share of the root column's median slab (the
+probe's second trunks: 0.79 or more; drooping branch ends and crowns 0.31-0.56)."""
 NARROW = 0.7
 """At least this share of the points within twice the column's radius lie within its radius."""
 
@@ -35,13 +36,18 @@ NARROW = 0.7
 def column(tree, pts: np.ndarray, up: np.ndarray, xy: np.ndarray, foot: float, rho: float,
             h: float) -> tuple[np.ndarray, np.ndarray]:
     """Points per slab (SLABS,) within ``rho`` of a column rising from height ``foot`` at ``xy`` (its
-    centre follows the points slab by slab), and those between ``rho`` and 2 ``rho`` (SLABS,)."""
+    centre follows the points slab by slab), and those between ``rho`` and 2 ``rho`` (SLABS,). The
+    first slab is recentred ``RECENTRE`` times on the mean of its points within 2 ``rho`` before it
+    counts: a foot is a point on the bark, not on the axis."""
     core, ring = np.zeros(SLABS, np.int64), np.zeros(SLABS, np.int64)
     centre = np.asarray(xy, np.float64)
     for k in range(SLABS):
-        idx = np.asarray(tree.query_ball_point(centre, 2 * rho), np.int64)
         lo = foot + k * SPAN * h / SLABS
-        idx = idx[(up[idx] >= lo) & (up[idx] < lo + SPAN * h / SLABS)]
+        for again in range(RECENTRE, -1, -1) if k == 0 else (0,):
+            idx = np.asarray(tree.query_ball_point(centre, 2 * rho), np.int64)
+            idx = idx[(up[idx] >= lo) & (up[idx] < lo + SPAN * h / SLABS)]
+            if again and len(idx):
+                centre = pts[idx, :2].mean(axis=0)
         d = np.linalg.norm(pts[idx, :2] - centre, axis=1)
         core[k], ring[k] = int((d < rho).sum()), int((d >= rho).sum())
         if core[k] >= 3:
@@ -52,19 +58,23 @@ def column(tree, pts: np.ndarray, up: np.ndarray, xy: np.ndarray, foot: float, r
 def _feet(pts: np.ndarray, up: np.ndarray, h: float) -> np.ndarray:
     """Indices of the lowest point of each ``FOOT_CELL`` xy cell that lies below ``FOOT_TOP`` of the
     height ``h`` (``up`` (N,): heights above the root) and no higher than the lowest points of the 8
-    cells around it."""
-    from scipy.ndimage import minimum_filter
-
+    cells around it. Only occupied cells are kept (a stray point far away costs no grid); the cells
+    widen so that no axis holds more than 2 ** 20 of them."""
     low = np.flatnonzero(up < FOOT_TOP * h)
     if len(low) == 0:
         return low
-    cell = max(FOOT_CELL * h, float(np.ptp(pts[low, :2], axis=0).max()) / 4096, 1e-300)
+    cell = max(FOOT_CELL * h, float(np.ptp(pts[low, :2], axis=0).max()) / 2 ** 20, 1e-300)
     key = np.floor((pts[low, :2] - pts[low, :2].min(axis=0)) / cell).astype(np.int64)
-    grid = np.full(tuple(key.max(axis=0) + 1), np.inf)
-    np.minimum.at(grid, (key[:, 0], key[:, 1]), up[low])
-    is_min = grid == minimum_filter(grid, size=3, mode="constant", cval=np.inf)
-    lowest = up[low] == grid[key[:, 0], key[:, 1]]
-    return low[lowest & is_min[key[:, 0], key[:, 1]]]
+    ny = int(key[:, 1].max()) + 3  # occupied cells only: a stray point far away costs no grid
+    cells, inv = np.unique((key[:, 0] + 1) * ny + key[:, 1] + 1, return_inverse=True)
+    cmin = np.full(len(cells), np.inf)
+    np.minimum.at(cmin, inv, up[low])
+    around = cmin.copy()
+    for off in (dx * ny + dy for dx in (-1, 0, 1) for dy in (-1, 0, 1)):
+        j = np.searchsorted(cells, cells + off).clip(max=len(cells) - 1)
+        hit = cells[j] == cells + off
+        around[hit] = np.minimum(around[hit], cmin[j[hit]])
+    return low[(up[low] == cmin[inv]) & (cmin == around)[inv]]
 
 
 class Column(NamedTuple):
@@ -103,8 +113,7 @@ def trunk_columns(pts: np.ndarray, root: np.ndarray, up: np.ndarray) -> list[Col
         if plan[i] < SEPARATE * h or any(np.linalg.norm(pts[i, :2] - f) < 2 * rho for f in found):
             continue
         core, ring = column(tree, pts[keep], rise[keep], pts[i, :2], float(rise[i]), rho, h)
-        if (core.min() >= FULL * np.median(core0) and core.sum() >= DENSE * core0.sum()
-                and core.sum() >= NARROW * (core.sum() + ring.sum())):
+        if core.min() >= FULL * np.median(core0) and core.sum() >= NARROW * (core.sum() + ring.sum()):
             found.append(pts[i, :2])
             out.append(Column(tuple(float(v) for v in pts[i]), float(plan[i]), float(rise[i])))
-    return sorted(out)
+    return sorted(out, key=lambda c: c.distance)

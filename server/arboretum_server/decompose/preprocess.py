@@ -218,6 +218,7 @@ def _base_clusters(base: np.ndarray, h: float, cloud: np.ndarray) -> tuple[np.nd
         dense = sizes[big] / np.maximum(base[:, 2].max() - low, 1e-9 * h)
         hanging = (low > low.min() + STANDING * h) & (dense < HANGING_SHARE * dense[0])
         hanging |= _no_column(cloud, [base[lab == c] for c in big], h)
+        hanging[0] = False  # the largest never hangs (an occluded trunk beside a bush is gappy and wide)
         big = big[~hanging]
     if len(big) >= 2:
         cents = np.array([np.median(base[lab == c], axis=0) for c in big])
