@@ -52,3 +52,25 @@ def test_a_lobe_behind_another_new_lobe_gets_a_branch_that_crosses_no_lobe(leaf_
     assert all(a.hull_vertices is b.hull_vertices and a.segment is b.segment for a, b in zip(old, kept))
     for k in new:  # every new branch ends at its lobe's centre
         assert np.linalg.norm(lobes[k].segment[-1] - lobes[k].centre) < 1e-9
+
+
+def test_giving_way_keeps_the_tunnel_cut_for_a_new_branch():
+    # The leaf-off pine, seed 3: inserting the outer half of lobe 1 routes the new lobe's branch through
+    # a tunnel carved in the other new lobe (``_behind_new``); giving way to two kept branches then
+    # carved that lobe again from its points with only the kept branches as blockers, filling the
+    # tunnel (1 crossing, a reviewer's case). The other new branches now stay blockers.
+    from arboretum_server.decompose.evaluate import connected, crossings
+    from arboretum_server.decompose.options import DecomposeOptions
+    from arboretum_server.decompose.pipeline import decompose
+    from arboretum_server.decompose.refine import insert_lobe
+    from arboretum_server.decompose.report import CASES, grow_truth
+    from arboretum_server.decompose.toytree import toy_scan
+
+    truth = grow_truth("harmonic", "pine", 3)
+    pts, _ = toy_scan(truth, n=40000, noise=0.002 * float(np.ptp(truth.positions[:, 2])), seed=3,
+                      **CASES["leaf-off"])
+    d = decompose(pts, DecomposeOptions(species="pine"))
+    m = d.lobes[1].members
+    r = np.linalg.norm(d.points[m][:, :2], axis=1)
+    out = insert_lobe(d, m[r >= np.quantile(r, 0.5)])
+    assert len(out.lobes) == len(d.lobes) + 1 and crossings(out.hbl) == 0 and connected(out.hbl)

@@ -143,8 +143,9 @@ def _give_way(lobes: list[LobeState], n_kept: int, cross: list[int], pts: np.nda
     tree the user already has keeps its branches."""
     wood = sample_polylines([lobes[i].segment for i in cross], step)
     for k in range(n_kept, len(lobes)):
-        if _enters(lobes[k], wood):
-            carve_lobe(lobes, k, pts, wood, radius)
+        if _enters(lobes[k], wood):  # the other new branches stay blockers: keep _behind_new's tunnels open
+            rest = sample_polylines([lobes[i].segment for i in range(n_kept, len(lobes)) if i != k], step)
+            carve_lobe(lobes, k, pts, np.concatenate([wood, rest]), radius)
 
 
 def _enters(lb: LobeState, wood: np.ndarray) -> bool:
@@ -161,8 +162,9 @@ def _behind_new(lobes: list[LobeState], n_kept: int, d: Decomposition, step: flo
 
     Such a lobe lies behind another new one: the outer part of a lobe that was inserted or split off,
     with the part left between it and the main branches, so every route to it runs through that part.
-    The new lobes are rebuilt by this operation anyway, and carving never grows a hull, so no other
-    branch starts crossing.
+    The new lobes are rebuilt by this operation anyway. A re-carved hull keeps out of the new blockers
+    only and may fill a tunnel cut before for another branch: ``_entered`` refuses such a result, and
+    ``_give_way`` keeps the other new branches as blockers when it carves a new lobe again.
     """
     tol = d.options.step / 2
     for j in range(n_kept, len(lobes)):
