@@ -237,7 +237,7 @@ def test_a_second_tree_standing_higher_is_named_in_a_note(truth, tmp_path, capsy
     assert main(["decompose", str(scan), "--up", "z", "--main", str(N_M), "--lobes", str(N_L)]) == 0
     out = capsys.readouterr().out
     got = re.search(r"note: 1 trunk-like column away from the trunk base \(foot at x (\S+), y (\S+), (\S+) from "
-                    r"the trunk base and (\S+) higher; scan units\): another tree\?", out)
+                    r"the trunk base and (\S+) higher; scan units, Z up\): another tree\?", out)
     assert got and np.allclose([float(v) for v in got.groups()], [*foot[:2], dist, rise], atol=0.02 * h)
 
 

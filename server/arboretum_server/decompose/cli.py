@@ -195,7 +195,7 @@ def _shortfall(options, stats: dict) -> list[str]:
         where = "; ".join(f"foot at x {c['foot'][0]:.4g}, y {c['foot'][1]:.4g}, {c['distance']:.3g} from the trunk "
                           f"base and {c['rise']:.3g} higher" for c in cols[:3])
         out.append(f"{len(cols)} trunk-like column{'s' if len(cols) > 1 else ''} away from the trunk base "
-                   f"({where}{'; ...' if len(cols) > 3 else ''}; scan units): another tree? It was "
+                   f"({where}{'; ...' if len(cols) > 3 else ''}; scan units, Z up): another tree? It was "
                    "decomposed as part of this one; crop the scan to one tree if it is not")
     return out
 
