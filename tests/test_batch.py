@@ -241,3 +241,29 @@ def test_workers_start_without_a_trim_threshold_left_in_the_parent(monkeypatch):
         env = next(iter(client.run(_worker_settings).values()))["env"]
         assert "MALLOC_TRIM_THRESHOLD_" not in os.environ
     assert "MALLOC_TRIM_THRESHOLD_" not in env and os.environ["MALLOC_TRIM_THRESHOLD_"] == "65536"
+
+
+def test_a_scan_with_notes_carries_them_into_the_report(tmp_path):
+    # a pole decomposes (its branches lie along it) but gets a note, which a library build of thousands
+    # of scans dropped: the record, report.json, report.md and the command's text now carry it
+    from arboretum_server.batch.build import BuildResult, ScanRecord, _store
+    from arboretum_server.batch.cli import _text
+    from arboretum_server.batch.report import as_dict
+    from arboretum_server.batch.tasks import decompose_scan
+
+    rng = np.random.default_rng(0)
+    pole = tmp_path / "pole.xyz"
+    write_points(pole, np.c_[rng.normal(0, 0.01, (3000, 2)), rng.uniform(0, 5, 3000)])
+    out = decompose_scan(str(pole), file_sha256(pole), {"points": POINTS})
+    assert out.error == "" and [n for n in out.notes if n.startswith("the cloud is nearly a straight line")]
+    record = ScanRecord(str(pole), "unknown")
+    with Library.open(tmp_path / "lib", create=True) as lib:
+        _store(lib, record, out)
+    assert record.status == "added" and record.notes == list(out.notes) and len(record.examples) >= 1
+    result = BuildResult(str(tmp_path / "lib"), [record])
+    files = write_report(result, tmp_path / "rep")
+    data = json.loads(Path(files["json"]).read_text())
+    assert data["records"][0]["notes"] == list(out.notes)
+    assert "nearly a straight line" in Path(files["markdown"]).read_text()
+    text = _text({**as_dict(result), "report": files})
+    assert f"  note: {pole}: the cloud is nearly a straight line" in text

@@ -78,6 +78,8 @@ class ScanRecord:
     error: str = ""
     seconds: dict[str, float] = field(default_factory=dict)
     stats: dict[str, Any] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+    """The decomposition's notes (a second trunk, a straight line, all foliage, counts not met)."""
 
 
 @dataclass
@@ -206,7 +208,7 @@ def _store(lib, r: ScanRecord, out: ScanOutcome | str) -> None:
     if isinstance(out, str):
         r.status, r.error = "failed", out
         return
-    r.seconds, r.stats = out.seconds, out.stats
+    r.seconds, r.stats, r.notes = out.seconds, out.stats, list(out.notes)
     if out.error:
         r.status, r.error = "failed", out.error
         return

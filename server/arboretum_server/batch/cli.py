@@ -60,5 +60,6 @@ def _text(d: dict) -> str:
              f"already there, {d['duplicate']} duplicates, {d['failed']} failed, in {d['wall_seconds']:.1f} s "
              f"on {d['workers']} workers ({d['cluster'] or 'no cluster needed'})"]
     lines += [f"  failed: {r['path']}: {r['error']}" for r in d["records"] if r["status"] == "failed"]
+    lines += [f"  note: {r['path']}: {n}" for r in d["records"] for n in r["notes"]]
     lines.append(f"report: {d['report'].get('markdown', '')}")
     return "\n".join(lines)

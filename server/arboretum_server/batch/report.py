@@ -36,7 +36,7 @@ def as_dict(result: BuildResult) -> dict[str, Any]:
         "examples_added": sum(len(r.examples) for r in added),
         "records": [{"path": r.path, "species": r.species, "status": r.status, "sha256": r.sha256,
                      "examples": r.examples, "error": r.error, "seconds": r.seconds,
-                     "points": r.stats.get("points_read")} for r in result.records],
+                     "points": r.stats.get("points_read"), "notes": r.notes} for r in result.records],
     }
 
 
@@ -122,7 +122,7 @@ def markdown(data: dict[str, Any], plots: dict[str, str]) -> str:
         secs = r["seconds"].get("total")
         lines.append(f"| {k} | {Path(r['path']).name} | {r['species']} | {r['status']} | {len(r['examples'])} | "
                      f"{r['points'] if r['points'] is not None else ''} | {'' if secs is None else f'{secs:.2f}'} | "
-                     f"{r['error'].replace('|', '/')} |")
+                     f"{'; '.join([r['error']] if r['error'] else r['notes']).replace('|', '/')} |")
     return "\n".join(lines) + "\n"
 
 

@@ -57,6 +57,8 @@ class ScanOutcome:
     """Wall times on the worker: read, decompose, examples, total."""
     stats: dict[str, Any] = field(default_factory=dict)
     """points_read and the decomposition's statistics."""
+    notes: tuple[str, ...] = ()
+    """What the decomposition did that its user may not expect (``decompose.notes``)."""
     worker_pid: int = 0
     """Process id of the worker that ran it."""
 
@@ -95,6 +97,7 @@ def _failed(path: str, sha256: str, message: str, t0: float) -> ScanOutcome:
 def _decompose(path: str, sha256: str, options: dict[str, Any], t0: float) -> ScanOutcome:
     from arboretum_library.pointio import read_points
     from arboretum_server.decompose.examples import counter_ids, make_examples, provenance
+    from arboretum_server.decompose.notes import notes
     from arboretum_server.decompose.options import DecomposeOptions
     from arboretum_server.decompose.pipeline import decompose
 
@@ -112,4 +115,4 @@ def _decompose(path: str, sha256: str, options: dict[str, Any], t0: float) -> Sc
     t_end = time.perf_counter()
     seconds = {"read": t_read - t0, "decompose": t_dec - t_read, "examples": t_end - t_dec, "total": t_end - t0}
     stats = {"points_read": len(cloud.points), **dec.stats}
-    return ScanOutcome(path, sha256, tuple(examples), "", seconds, stats, os.getpid())
+    return ScanOutcome(path, sha256, tuple(examples), "", seconds, stats, tuple(notes(opts, dec.stats)), os.getpid())

@@ -18,14 +18,6 @@ from arboretum_library.cli import add_json_flag, emit
 
 UP_CHOICES = ("auto", "z", "y")
 
-LINE = 0.03
-"""A cloud whose ``width_ratio`` is under this gets a note: it is a pole or a stick, not a tree."""
-ALL_LEAF = 0.95
-"""A cloud with at least this fraction of foliage points gets a note: its branches have no wood to follow
-(the bundled real scans measure 2-37 % foliage, the synthetic test trees 1-70 %, a tall Gaussian blob
-99.8 %)."""
-
-
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("decompose", help="decompose a tree scan into HBL examples (VRTree 3.4)")
     p.add_argument("scan", help="point cloud file (.xyz/.txt/.ply/.las/.laz/.npy ...)")
@@ -75,6 +67,8 @@ def run(args: argparse.Namespace) -> int:
     from arboretum_library.pointio import ReadOptions, read_points
     from arboretum_library.progress import StatusLine
 
+    from .notes import notes
+
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     options = _options(args)
     _check_output(args.save_hbl)
@@ -91,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
         "scan": args.scan, "points_read": len(cloud.points), "stats": dec.stats,
         "timing_s": {"read": t_read, **dec.timing}, "examples": [e.id for e in examples],
         "stored": stored, "library": str(args.library) if lib is not None else None, "hbl": args.save_hbl,
-        "options": options.as_dict(), "notes": _notes(options) + _shortfall(options, dec.stats),
+        "options": options.as_dict(), "notes": notes(options, dec.stats),
     }
     emit(args, data, _text(data))
     return 0
@@ -172,44 +166,6 @@ def _check_output(path: str | None) -> None:
     if os.path.isdir(path) or not os.path.isdir(folder):
         what = "is a folder" if os.path.isdir(path) else f"is in a folder that does not exist ({folder})"
         raise InputError(f"--save-hbl {path} {what}")
-
-
-def _shortfall(options, stats: dict) -> list[str]:
-    """Notes for what the decomposition could not meet: counts, and wood to route the branches on."""
-    n_m, n_l = options.counts()
-    out = []
-    if stats["main_branches"] < n_m:
-        out.append(f"{stats['main_branches']} main branches found, {n_m} asked: the other candidate paths "
-                   "merged into them (Algorithm 1)")
-    if stats["lobes"] < n_l:
-        out.append(f"{stats['lobes']} lobes made, {n_l} asked: too few foliage points")
-    leaf = stats["leaf_points"] / max(stats["points"], 1)
-    if leaf >= ALL_LEAF:
-        out.append(f"{leaf:.1%} of the points are foliage ({stats['labels']} labels) and almost none wood: the "
-                   "branches were routed through foliage and are a guess (is this one tree, with its trunk?)")
-    if stats["width_ratio"] < LINE:
-        out.append(f"the cloud is nearly a straight line (it spreads {stats['width_ratio']:.1%} as wide as it "
-                   "is long): there is no crown to decompose, and the branches lie along that line")
-    cols = stats["trunk_columns"]
-    if cols:
-        where = "; ".join(f"foot at x {c['foot'][0]:.4g}, y {c['foot'][1]:.4g}, {c['distance']:.3g} from the trunk "
-                          f"base and {c['rise']:.3g} higher" for c in cols[:3])
-        out.append(f"{len(cols)} trunk-like column{'s' if len(cols) > 1 else ''} away from the trunk base "
-                   f"({where}{'; ...' if len(cols) > 3 else ''}; scan units, Z up): another tree? It was "
-                   "decomposed as part of this one; crop the scan to one tree if it is not")
-    return out
-
-
-def _notes(options) -> list[str]:
-    """What the run assumes that the user may not expect (printed with the result)."""
-    from .options import DEFAULT_COUNTS, SPECIES_COUNTS
-
-    missing = [f"{name} = {v}" for name, v, given in (("N_m", DEFAULT_COUNTS[0], options.n_main),
-                                                       ("N_l", DEFAULT_COUNTS[1], options.n_lobes)) if given is None]
-    if options.species in SPECIES_COUNTS or options.species == "unknown" or not missing:
-        return []
-    return [f"species '{options.species}' is not in VRTree Table 2 ({', '.join(SPECIES_COUNTS)}): "
-            f"{', '.join(missing)} (the table's medians)"]
 
 
 def _text(d: dict) -> str:

@@ -1,0 +1,54 @@
+"""Notes on a decomposition: what the run did that its user may not expect (printed by ``arboretum
+decompose`` after the result, and kept per scan in a library build's report)."""
+
+from __future__ import annotations
+
+from .options import DEFAULT_COUNTS, SPECIES_COUNTS, DecomposeOptions
+
+LINE = 0.03
+"""A cloud whose ``width_ratio`` is under this gets a note: it is a pole or a stick, not a tree."""
+ALL_LEAF = 0.95
+"""A cloud with at least this fraction of foliage points gets a note: its branches have no wood to follow
+(the bundled real scans measure 2-37 % foliage, the synthetic test trees 1-70 %, a tall Gaussian blob
+99.8 %)."""
+
+
+def notes(options: DecomposeOptions, stats: dict) -> list[str]:
+    """Every note for a decomposition run with ``options`` that gave ``stats`` (``Decomposition.stats``)."""
+    return option_notes(options) + result_notes(options, stats)
+
+
+def result_notes(options: DecomposeOptions, stats: dict) -> list[str]:
+    """Notes for what the decomposition could not meet: counts, and wood to route the branches on."""
+    n_m, n_l = options.counts()
+    out = []
+    if stats["main_branches"] < n_m:
+        out.append(f"{stats['main_branches']} main branches found, {n_m} asked: the other candidate paths "
+                   "merged into them (Algorithm 1)")
+    if stats["lobes"] < n_l:
+        out.append(f"{stats['lobes']} lobes made, {n_l} asked: too few foliage points")
+    leaf = stats["leaf_points"] / max(stats["points"], 1)
+    if leaf >= ALL_LEAF:
+        out.append(f"{leaf:.1%} of the points are foliage ({stats['labels']} labels) and almost none wood: the "
+                   "branches were routed through foliage and are a guess (is this one tree, with its trunk?)")
+    if stats["width_ratio"] < LINE:
+        out.append(f"the cloud is nearly a straight line (it spreads {stats['width_ratio']:.1%} as wide as it "
+                   "is long): there is no crown to decompose, and the branches lie along that line")
+    cols = stats["trunk_columns"]
+    if cols:
+        where = "; ".join(f"foot at x {c['foot'][0]:.4g}, y {c['foot'][1]:.4g}, {c['distance']:.3g} from the trunk "
+                          f"base and {c['rise']:.3g} higher" for c in cols[:3])
+        out.append(f"{len(cols)} trunk-like column{'s' if len(cols) > 1 else ''} away from the trunk base "
+                   f"({where}{'; ...' if len(cols) > 3 else ''}; scan units, Z up): another tree? It was "
+                   "decomposed as part of this one; crop the scan to one tree if it is not")
+    return out
+
+
+def option_notes(options: DecomposeOptions) -> list[str]:
+    """What the run assumes that the user may not expect (printed with the result)."""
+    missing = [f"{name} = {v}" for name, v, given in (("N_m", DEFAULT_COUNTS[0], options.n_main),
+                                                       ("N_l", DEFAULT_COUNTS[1], options.n_lobes)) if given is None]
+    if options.species in SPECIES_COUNTS or options.species == "unknown" or not missing:
+        return []
+    return [f"species '{options.species}' is not in VRTree Table 2 ({', '.join(SPECIES_COUNTS)}): "
+            f"{', '.join(missing)} (the table's medians)"]
