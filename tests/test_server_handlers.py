@@ -225,3 +225,18 @@ def test_warm_up_imports_what_inline_handlers_need():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.stdout.split() == ["False", "True", "True"], out.stderr
+
+
+def test_an_imported_scan_brings_its_notes_over_the_wire(tmp_path):
+    # library.import returned ids and counts only: a client never heard that its scan was a pole, held
+    # a second trunk or was all foliage. The reply now carries the command's notes, and survives the wire
+    from arboretum_library.protocol_base import parse, to_frames
+    from arboretum_server.service.handlers.library import import_job
+
+    rng = np.random.default_rng(0)
+    pole = np.c_[rng.normal(0, 0.01, (3000, 2)), rng.uniform(0, 5, 3000)]
+    result = import_job(lambda *a: None, str(tmp_path / "lib"), pole, None, "pole", "unknown", {"points": 2000})
+    assert len(result["ids"]) >= 1 and [n for n in result["notes"] if "nearly a straight line" in n]
+    reply = P.LibraryImported(ids=tuple(result["ids"]), notes=tuple(result["notes"]))
+    _, back = parse(to_frames(reply, 7))
+    assert back.notes == tuple(result["notes"]) and back.ids == reply.ids

@@ -166,6 +166,8 @@ class LibraryDelete(Request):
 class LibraryImported(Reply):
     ids: tuple[str, ...] = arg(default=(), doc="ids of the examples added to the library")
     stats: dict = arg(default={}, doc="decomposition counts")
+    notes: tuple[str, ...] = arg(default=(), doc="what the decomposition did that the user may not expect "
+                                                 "(a second trunk, a straight line, all foliage, counts not met)")
 
 
 @message("library.import", LibraryImported, long=True)

@@ -64,6 +64,7 @@ def import_job(progress, library_path: str, points: np.ndarray, labels: np.ndarr
     from arboretum_library.model import Provenance
     from arboretum_library.store import Library
     from arboretum_server.decompose.examples import make_examples
+    from arboretum_server.decompose.notes import notes
     from arboretum_server.decompose.pipeline import decompose
 
     opts = options_from(species, options)
@@ -72,7 +73,7 @@ def import_job(progress, library_path: str, points: np.ndarray, labels: np.ndarr
     stem = "".join(c if c.isalnum() or c in "-_" else "-" for c in name)[:60] or "scan"
     with Library.open(library_path, create=True) as lib:
         examples = make_examples(dec.hbl, prov, lambda: lib.new_id(stem), lib.add)
-    return {"ids": [e.id for e in examples], "stats": dec.stats}
+    return {"ids": [e.id for e in examples], "stats": dec.stats, "notes": notes(opts, dec.stats)}
 
 
 def import_scan(ctx: Context, req: P.LibraryImport) -> Job:
@@ -82,7 +83,8 @@ def import_scan(ctx: Context, req: P.LibraryImport) -> Job:
               "name": req.name, "species": req.species, "options": req.options}
 
     def finish(result: dict) -> P.LibraryImported:
-        return P.LibraryImported(ids=tuple(result["ids"]), stats=_jsonable(result["stats"]))
+        return P.LibraryImported(ids=tuple(result["ids"]), stats=_jsonable(result["stats"]),
+                                 notes=tuple(result["notes"]))
 
     return Job(f"{__name__}:import_job", kwargs, finish)
 
