@@ -255,6 +255,12 @@ def test_weeping_leaves_on_the_ground_are_no_second_trunk(truth):
     leaves = np.c_[centre + rng.normal(0, 1, (100, 2)) * (0.003 * h + 2 * (t - t.min()))[:, None], z.min() + t]
     plain, weeping = decompose(pts, OPTS), decompose(np.vstack([pts, leaves]), OPTS)
     np.testing.assert_allclose(weeping.root_scan, plain.root_scan)
+    # so do three times as many, more in the band than the trunk holds: the largest cluster may hang,
+    # the lowest may not (a reviewer's case: 'the largest never hangs' refused this as two trees)
+    t3 = rng.uniform(0.004, 0.12, 300) * h
+    heavy = np.c_[centre + rng.normal(0, 1, (300, 2)) * (0.003 * h + 2 * (t3 - t3.min()))[:, None], z.min() + t3]
+    assert (heavy[:, 2] < z.min() + 0.03 * h).sum() > band.sum()
+    np.testing.assert_allclose(decompose(np.vstack([pts, heavy]), OPTS).root_scan, plain.root_scan)
     # the same points standing as a column are a trunk
     stem = np.c_[centre + rng.normal(0, 0.005 * h, (100, 2)), z.min() + t]
     with pytest.raises(InputError, match="2 separate trunks"):

@@ -5,8 +5,9 @@ foot stands higher (up a slope with no ground scanned, on a bank) never enters t
 decomposed as part of the first. Here every foot (the lowest point of an xy cell, lower than its
 neighbours', in the lowest ``FOOT_TOP`` of the height) more than ``SEPARATE`` of the height from the
 root is followed upwards: a column whose every slab holds most of what a slab of the root's own
-trunk column holds (``FULL``), and whose points lie within its radius (``NARROW``), is reported. A drooping branch or a crown bent down to the ground can look the same, so
-the decomposition goes on and the command prints a note; it does not refuse.
+trunk column holds (``FULL``, and at least ``MIN_SLAB`` points), and whose points lie within its
+radius (``NARROW``), is reported. A drooping branch or a crown bent down to the ground can look the
+same, so the decomposition goes on and the command prints a note; it does not refuse.
 """
 
 from __future__ import annotations
@@ -31,6 +32,8 @@ FULL = 0.6
 probe's second trunks: 0.79 or more; drooping branch ends and crowns 0.31-0.56)."""
 NARROW = 0.7
 """At least this share of the points within twice the column's radius lie within its radius."""
+MIN_SLAB = 3
+"""Fewest points in any slab of a trunk column (a root column with empty slabs makes ``FULL`` vacuous)."""
 
 
 def column(tree, pts: np.ndarray, up: np.ndarray, xy: np.ndarray, foot: float, rho: float,
@@ -85,7 +88,7 @@ class Column(NamedTuple):
     distance: float
     """Plan-view distance of the foot from the root."""
     rise: float
-    """Height of the foot above the root (above the ground plane when there is one)."""
+    """Height of the foot above the root's (both measured from the ground plane when there is one)."""
 
 
 def trunk_columns(pts: np.ndarray, root: np.ndarray, up: np.ndarray) -> list[Column]:
@@ -113,7 +116,8 @@ def trunk_columns(pts: np.ndarray, root: np.ndarray, up: np.ndarray) -> list[Col
         if plan[i] < SEPARATE * h or any(np.linalg.norm(pts[i, :2] - f) < 2 * rho for f in found):
             continue
         core, ring = column(tree, pts[keep], rise[keep], pts[i, :2], float(rise[i]), rho, h)
-        if core.min() >= FULL * np.median(core0) and core.sum() >= NARROW * (core.sum() + ring.sum()):
+        if (core.min() >= max(FULL * np.median(core0), MIN_SLAB)
+                and core.sum() >= NARROW * (core.sum() + ring.sum())):
             found.append(pts[i, :2])
             out.append(Column(tuple(float(v) for v in pts[i]), float(plan[i]), float(rise[i])))
     return sorted(out, key=lambda c: c.distance)

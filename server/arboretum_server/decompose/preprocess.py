@@ -200,8 +200,8 @@ def find_root(pts: np.ndarray, ground: np.ndarray | None = None) -> np.ndarray:
 
 def _base_clusters(base: np.ndarray, h: float, cloud: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Cluster labels of the base band (links shorter than 2 % of height) and the big clusters that do
-    not hang from the crown (``STANDING``, ``_no_column``; ``cloud`` (N, 3): the whole cloud), largest
-    first. InputError when two of those lie more than 10 % of the height apart (several
+    not hang from the crown (``STANDING``; ``_no_column`` for all but the lowest; ``cloud`` (N, 3): the
+    whole cloud), largest first. InputError when two of those lie more than 10 % of the height apart (several
     trees). ``base`` and ``cloud`` hold x, y and the height above the ground."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
@@ -217,8 +217,9 @@ def _base_clusters(base: np.ndarray, h: float, cloud: np.ndarray) -> tuple[np.nd
         low = np.array([base[lab == c, 2].min() for c in big])
         dense = sizes[big] / np.maximum(base[:, 2].max() - low, 1e-9 * h)
         hanging = (low > low.min() + STANDING * h) & (dense < HANGING_SHARE * dense[0])
-        hanging |= _no_column(cloud, [base[lab == c] for c in big], h)
-        hanging[0] = False  # the largest never hangs (an occluded trunk beside a bush is gappy and wide)
+        column = _no_column(cloud, [base[lab == c] for c in big], h)
+        column[np.argmin(low)] = False  # the lowest never hangs this way (an occluded trunk beside a bush
+        hanging |= column  # is gappy and wide; weeping leaves may outnumber a thin trunk in the band)
         big = big[~hanging]
     if len(big) >= 2:
         cents = np.array([np.median(base[lab == c], axis=0) for c in big])
