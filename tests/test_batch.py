@@ -246,7 +246,7 @@ def test_workers_start_without_a_trim_threshold_left_in_the_parent(monkeypatch):
 def test_a_scan_with_notes_carries_them_into_the_report(tmp_path):
     # a pole decomposes (its branches lie along it) but gets a note, which a library build of thousands
     # of scans dropped: the record, report.json, report.md and the command's text now carry it
-    from arboretum_server.batch.build import BuildResult, ScanRecord, _store
+    from arboretum_server.batch.build import BuildResult, ScanRecord, _plan, _store
     from arboretum_server.batch.cli import _text
     from arboretum_server.batch.report import as_dict
     from arboretum_server.batch.tasks import decompose_scan
@@ -267,3 +267,11 @@ def test_a_scan_with_notes_carries_them_into_the_report(tmp_path):
     assert "nearly a straight line" in Path(files["markdown"]).read_text()
     text = _text({**as_dict(result), "report": files})
     assert f"  note: {pole}: the cloud is nearly a straight line" in text
+    # a rerun skips the scan and reports its notes again, read back from the library
+    again = ScanRecord(str(pole), "my|species\nname")
+    with Library.open(tmp_path / "lib") as lib:
+        assert _plan(lib, [again], BuildResult(str(tmp_path / "lib"), [again])) == []
+    assert again.status == "skipped" and again.notes == list(out.notes)
+    files = write_report(BuildResult(str(tmp_path / "lib"), [again]), tmp_path / "rep2")
+    row = [line for line in Path(files["markdown"]).read_text().splitlines() if "pole.xyz" in line]
+    assert len(row) == 1 and "my\\|species name" in row[0] and "nearly a straight line" in row[0]

@@ -182,7 +182,10 @@ def test_refinement_flow(server):
     r = ok(server, P.RefineRedo(session=sid))
     assert len(r.hbl.lobes) == 6 and r.revision == 6
     err(server, P.RemoveLobe(session=sid, lobe=99), "bad_input", "lobe 99")
-    ids = ok(server, P.RefineCommit(session=sid)).ids
+    assert len(ok(server, P.RemoveLobe(session=sid, lobe=5)).hbl.lobes) == 5
+    done = ok(server, P.RefineCommit(session=sid))
+    assert done.notes == ()  # 5 lobes of 6 asked is the user's choice, not 'too few foliage points'
+    ids = done.ids
     assert len(ids) == len(r.hbl.by_level(0)) and all(i.startswith("toy-") for i in ids)
     assert set(ids) <= {e["id"] for e in ok(server, P.LibraryList()).entries}
 

@@ -167,7 +167,8 @@ class LibraryImported(Reply):
     ids: tuple[str, ...] = arg(default=(), doc="ids of the examples added to the library")
     stats: dict = arg(default={}, doc="decomposition counts")
     notes: tuple[str, ...] = arg(default=(), doc="what the decomposition did that the user may not expect "
-                                                 "(a second trunk, a straight line, all foliage, counts not met)")
+                                                 "(a second trunk, a straight line, all foliage, counts not met, "
+                                                 "a species not in Table 2; refine.commit: not the counts)")
 
 
 @message("library.import", LibraryImported, long=True)

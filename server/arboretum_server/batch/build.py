@@ -31,6 +31,7 @@ from arboretum_library.progress import ProgressFn, no_progress
 
 from .tasks import (
     MALLOC_STATIC,
+    NOTES_KEY,
     SCAN_EXAMPLES_KEY,
     WORKER_CONFIG,
     WORKER_ENV,
@@ -162,6 +163,7 @@ def _plan(lib, records: list[ScanRecord], result: BuildResult) -> list[ScanRecor
         ids = lib.find_source(r.sha256)
         if ids and _complete(lib, ids):
             r.status, r.examples = "skipped", list(ids)
+            r.notes = list(lib.get(ids[0]).provenance.parameters.get(NOTES_KEY, []))
             continue
         for id_ in ids:  # a build was killed while storing this scan: start it again
             lib.delete(id_)

@@ -120,10 +120,16 @@ def markdown(data: dict[str, Any], plots: dict[str, str]) -> str:
               "|---|---|---|---|---|---|---|---|"]
     for k, r in enumerate(data["records"], 1):
         secs = r["seconds"].get("total")
-        lines.append(f"| {k} | {Path(r['path']).name} | {r['species']} | {r['status']} | {len(r['examples'])} | "
-                     f"{r['points'] if r['points'] is not None else ''} | {'' if secs is None else f'{secs:.2f}'} | "
-                     f"{'; '.join([r['error']] if r['error'] else r['notes']).replace('|', '/')} |")
+        note = "; ".join([r["error"]] if r["error"] else r["notes"])
+        lines.append(f"| {k} | {_cell(Path(r['path']).name)} | {_cell(r['species'])} | {r['status']} | "
+                     f"{len(r['examples'])} | {r['points'] if r['points'] is not None else ''} | "
+                     f"{'' if secs is None else f'{secs:.2f}'} | {_cell(note)} |")
     return "\n".join(lines) + "\n"
+
+
+def _cell(text: str) -> str:
+    """``text`` on one line, its '|' escaped: a markdown table cell."""
+    return " ".join(str(text).split()).replace("|", "\\|")
 
 
 def _atomic(path: Path, data: bytes) -> str:

@@ -39,6 +39,8 @@ WORKER_CONFIG = {
 10 ms) and slower housekeeping ticks; together about 8 % of a scan's time on this machine (measured)."""
 SCAN_EXAMPLES_KEY = "scan_examples"
 """Provenance parameter holding how many examples the scan gave (to tell a complete scan on resume)."""
+NOTES_KEY = "decompose_notes"
+"""Provenance parameter holding the scan's decomposition notes (reported again when a rerun skips it)."""
 
 
 @dataclass(frozen=True)
@@ -97,7 +99,7 @@ def _failed(path: str, sha256: str, message: str, t0: float) -> ScanOutcome:
 def _decompose(path: str, sha256: str, options: dict[str, Any], t0: float) -> ScanOutcome:
     from arboretum_library.pointio import read_points
     from arboretum_server.decompose.examples import counter_ids, make_examples, provenance
-    from arboretum_server.decompose.notes import notes
+    from arboretum_server.decompose.notes import result_notes
     from arboretum_server.decompose.options import DecomposeOptions
     from arboretum_server.decompose.pipeline import decompose
 
@@ -110,9 +112,10 @@ def _decompose(path: str, sha256: str, options: dict[str, Any], t0: float) -> Sc
     examples = make_examples(dec.hbl, prov, counter_ids("scan"))
     if not examples:
         return _failed(path, sha256, "decomposition gave no examples (no main branch found)", t0)
-    params = {**prov.parameters, SCAN_EXAMPLES_KEY: len(examples)}
+    said = result_notes(opts, dec.stats)  # the species note would repeat for every scan of a species
+    params = {**prov.parameters, SCAN_EXAMPLES_KEY: len(examples), NOTES_KEY: said}
     examples = [replace(e, provenance=replace(e.provenance, parameters=params)) for e in examples]
     t_end = time.perf_counter()
     seconds = {"read": t_read - t0, "decompose": t_dec - t_read, "examples": t_end - t_dec, "total": t_end - t0}
     stats = {"points_read": len(cloud.points), **dec.stats}
-    return ScanOutcome(path, sha256, tuple(examples), "", seconds, stats, tuple(notes(opts, dec.stats)), os.getpid())
+    return ScanOutcome(path, sha256, tuple(examples), "", seconds, stats, tuple(said), os.getpid())

@@ -19,24 +19,32 @@ def notes(options: DecomposeOptions, stats: dict) -> list[str]:
 
 
 def result_notes(options: DecomposeOptions, stats: dict) -> list[str]:
-    """Notes for what the decomposition could not meet: counts, and wood to route the branches on."""
+    """Notes for what the decomposition could not meet (counts), then ``scan_notes``. A figure missing
+    from ``stats`` gives no note."""
     n_m, n_l = options.counts()
     out = []
-    if stats["main_branches"] < n_m:
+    if stats.get("main_branches", n_m) < n_m:
         out.append(f"{stats['main_branches']} main branches found, {n_m} asked: the other candidate paths "
                    "merged into them (Algorithm 1)")
-    if stats["lobes"] < n_l:
+    if stats.get("lobes", n_l) < n_l:
         out.append(f"{stats['lobes']} lobes made, {n_l} asked: too few foliage points")
-    leaf = stats["leaf_points"] / max(stats["points"], 1)
+    return out + scan_notes(stats)
+
+
+def scan_notes(stats: dict) -> list[str]:
+    """Notes on the cloud itself (all foliage, a straight line, trunk-like columns away from the root),
+    which refinement does not change. A figure missing from ``stats`` gives no note."""
+    out = []
+    leaf = stats.get("leaf_points", 0) / max(stats.get("points", 0), 1)
     if leaf >= ALL_LEAF:
         out.append(f"{leaf:.1%} of the points are foliage ({stats['labels']} labels) and almost none wood: the "
                    "branches were routed through foliage and are a guess (is this one tree, with its trunk?)")
-    if stats["width_ratio"] < LINE:
+    if stats.get("width_ratio", 1.0) < LINE:
         out.append(f"the cloud is nearly a straight line (it spreads {stats['width_ratio']:.1%} as wide as it "
                    "is long): there is no crown to decompose, and the branches lie along that line")
-    cols = stats["trunk_columns"]
+    cols = stats.get("trunk_columns") or []
     if cols:
-        where = "; ".join(f"foot at x {c['foot'][0]:.4g}, y {c['foot'][1]:.4g}, {c['distance']:.3g} from the trunk "
+        where = "; ".join(f"foot at x {c['foot'][0]:.7g}, y {c['foot'][1]:.7g}, {c['distance']:.3g} from the trunk "
                           f"base and {c['rise']:.3g} higher" for c in cols[:3])
         out.append(f"{len(cols)} trunk-like column{'s' if len(cols) > 1 else ''} away from the trunk base "
                    f"({where}{'; ...' if len(cols) > 3 else ''}; scan units, Z up): another tree? It was "

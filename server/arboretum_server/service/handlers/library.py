@@ -69,11 +69,12 @@ def import_job(progress, library_path: str, points: np.ndarray, labels: np.ndarr
 
     opts = options_from(species, options)
     dec = decompose(points, opts, progress, labels=labels)
+    said = notes(opts, dec.stats)  # before anything is stored
     prov = Provenance(name, "", opts.species, opts.as_dict())
     stem = "".join(c if c.isalnum() or c in "-_" else "-" for c in name)[:60] or "scan"
     with Library.open(library_path, create=True) as lib:
         examples = make_examples(dec.hbl, prov, lambda: lib.new_id(stem), lib.add)
-    return {"ids": [e.id for e in examples], "stats": dec.stats, "notes": notes(opts, dec.stats)}
+    return {"ids": [e.id for e in examples], "stats": dec.stats, "notes": said}
 
 
 def import_scan(ctx: Context, req: P.LibraryImport) -> Job:

@@ -140,14 +140,16 @@ def redo(ctx: Context, req: P.RefineRedo):
 def commit(ctx: Context, req: P.RefineCommit):
     from arboretum_library.model import Provenance
     from arboretum_server.decompose.examples import make_examples
+    from arboretum_server.decompose.notes import option_notes, scan_notes
 
     def then(s: Session, d: RefineDraft) -> P.LibraryImported:
         dec = d.current
+        said = tuple(option_notes(dec.options) + scan_notes(dec.stats))  # the user chose the lobe count
         lib = ctx.library()
         prov = Provenance(d.name, "", dec.options.species, dec.options.as_dict())
         stem = "".join(c if c.isalnum() or c in "-_" else "-" for c in d.name)[:60] or "scan"
         examples = make_examples(dec.hbl, prov, lambda: lib.new_id(stem), lib.add)
-        return P.LibraryImported(ids=tuple(e.id for e in examples), stats={"lobes": len(dec.lobes)})
+        return P.LibraryImported(ids=tuple(e.id for e in examples), stats={"lobes": len(dec.lobes)}, notes=said)
 
     return _with_draft(ctx, req.session, then)
 
