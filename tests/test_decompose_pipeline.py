@@ -245,7 +245,7 @@ def test_weeping_leaves_on_the_ground_are_no_second_trunk(truth):
     # a weeping branch's leaves reach the ground 0.3 of the height from the trunk, their lowest point
     # only 0.4 % of the height above the trunk's (too low to hang by STANDING), spreading wider as
     # they rise (2 m out per metre up): no trunk column rises from them. The guiding elm on a ground
-    # disc was refused as "2 separate trunks" in 8 of its 15 probe clouds, 1 now
+    # disc was refused as "2 separate trunks" in 8 of its 15 probe clouds, 2 now
     pts = toy_scan(truth, 6000)[0]
     z = pts[:, 2]
     h, band = np.ptp(z), z < z.min() + 0.03 * np.ptp(z)
