@@ -176,8 +176,9 @@ def find_root(pts: np.ndarray, ground: np.ndarray | None = None) -> np.ndarray:
 
     The band is the lowest ``BASE_BAND`` of the height, measured from the ``ground`` plane (a, b, c) when
     one was found (a second tree up the slope stands in it too), else from the lowest point.
-    InputError when the band holds several well-separated trunks (clusters hanging from the crown aside,
-    ``STANDING``), or when its largest cluster spreads too wide to be one trunk base.
+    InputError when the band holds several well-separated trunks (clusters hanging from the crown aside:
+    ``STANDING``, ``_no_column``), or when its largest cluster spreads too wide to be one trunk base.
+    A second tree standing higher than the band is not refused here: see ``columns.trunk_columns``.
     """
     z = pts[:, 2]
     h = np.ptp(z)
