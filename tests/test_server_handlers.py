@@ -234,12 +234,17 @@ def test_an_imported_scan_brings_its_notes_over_the_wire(tmp_path):
     # library.import returned ids and counts only: a client never heard that its scan was a pole, held
     # a second trunk or was all foliage. The reply now carries the command's notes, and survives the wire
     from arboretum_library.protocol_base import parse, to_frames
-    from arboretum_server.service.handlers.library import import_job
+    from arboretum_server.service.handlers.library import _jsonable, import_job
 
     rng = np.random.default_rng(0)
     pole = np.c_[rng.normal(0, 0.01, (3000, 2)), rng.uniform(0, 5, 3000)]
     result = import_job(lambda *a: None, str(tmp_path / "lib"), pole, None, "pole", "unknown", {"points": 2000})
     assert len(result["ids"]) >= 1 and [n for n in result["notes"] if "nearly a straight line" in n]
-    reply = P.LibraryImported(ids=tuple(result["ids"]), notes=tuple(result["notes"]))
+    reply = P.LibraryImported(ids=tuple(result["ids"]), notes=tuple(result["notes"]), stats=_jsonable(result["stats"]))
     _, back = parse(to_frames(reply, 7))
     assert back.notes == tuple(result["notes"]) and back.ids == reply.ids
+    # the figures behind the notes travel too (lists and dicts of numbers were dropped)
+    assert back.stats["width_ratio"] < 0.03 and back.stats["trunk_columns"] == [] and back.stats["points"] == 2000
+    cols = [{"foot": [np.float64(1.0), 2.0, 3.0], "distance": 1.5, "rise": 0.25}]
+    assert _jsonable({"trunk_columns": cols, "hull": np.zeros(3)}) == {
+        "trunk_columns": [{"foot": [1.0, 2.0, 3.0], "distance": 1.5, "rise": 0.25}]}

@@ -91,14 +91,28 @@ def import_scan(ctx: Context, req: P.LibraryImport) -> Job:
 
 
 def _jsonable(d: dict) -> dict:
-    """The entries of ``d`` that are numbers or strings, as plain Python values."""
+    """The entries of ``d`` that are numbers, strings, or lists and dicts of them (``trunk_columns``), as
+    plain Python values; anything else is left out."""
     out = {}
     for k, v in d.items():
-        if isinstance(v, np.generic):
-            out[k] = v.item()
-        elif isinstance(v, str | int | float | bool):
-            out[k] = v
+        try:
+            out[k] = _plain(v)
+        except TypeError:
+            continue
     return out
+
+
+def _plain(v):
+    """``v`` as plain numbers, strings, lists and str-keyed dicts; TypeError for anything else."""
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, str | int | float | bool):
+        return v
+    if isinstance(v, list | tuple):
+        return [_plain(x) for x in v]
+    if isinstance(v, dict) and all(isinstance(k, str) for k in v):
+        return {k: _plain(x) for k, x in v.items()}
+    raise TypeError(type(v).__name__)
 
 
 HANDLERS = {
