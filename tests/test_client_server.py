@@ -118,8 +118,10 @@ def test_refinement_mode_on_a_real_scan(server, client):
 
 
 def test_cli_starts_an_embedded_server_and_runs_a_script(server, tmp_path):
-    """``arboretum client`` without --connect starts ``arboretum serve`` itself (and stops it)."""
+    """``arboretum client`` without --connect starts ``arboretum serve`` itself (and stops it, removing
+    the temporary folder its autosaves went to)."""
     import json
+    import os
     import subprocess
     import sys
 
@@ -130,8 +132,11 @@ def test_cli_starts_an_embedded_server_and_runs_a_script(server, tmp_path):
     cmd = [sys.executable, "-m", "arboretum_library.cli", "client", "--library", lib, "--headless", "--script",
            str(script), "--screenshot", str(tmp_path / "shot.png"), "--size", "640x400", "--out", str(tmp_path),
            "--json"]
-    done = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=180, env={**os.environ, "TMPDIR": str(scratch)})
     assert done.returncode == 0, done.stderr[-2000:]
+    assert sorted(p.name for p in scratch.iterdir() if p.name.startswith("arboretum-client-state-")) == []
     out = json.loads(done.stdout)
     assert out["placements"] == 1 and out["errors"] == [] and out["exported"] == [str(tmp_path / "tree.glb")]
     assert (tmp_path / "tree.glb").read_bytes()[:4] == b"glTF" and (tmp_path / "shot.png").stat().st_size > 1000
