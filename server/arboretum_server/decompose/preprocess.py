@@ -214,7 +214,10 @@ def _base_clusters(base: np.ndarray, h: float, cloud: np.ndarray) -> tuple[np.nd
     sizes = np.bincount(lab)
     big = np.flatnonzero(sizes >= max(10, 0.1 * len(base)))
     big = big[np.argsort(-sizes[big])]
-    if len(big) >= 2:
+    fallen = _trunks_under_fallen_crown(base, lab, big, cloud, h)
+    if fallen is not None:
+        big = fallen
+    elif len(big) >= 2:
         low = np.array([base[lab == c, 2].min() for c in big])
         dense = sizes[big] / np.maximum(base[:, 2].max() - low, 1e-9 * h)
         hanging = (low > low.min() + STANDING * h) & (dense < HANGING_SHARE * dense[0])
@@ -239,6 +242,55 @@ def _base_clusters(base: np.ndarray, h: float, cloud: np.ndarray) -> tuple[np.nd
     return lab, big
 
 
+def _trunks_under_fallen_crown(base: np.ndarray, lab: np.ndarray, big: np.ndarray, cloud: np.ndarray,
+                               h: float) -> np.ndarray | None:
+    """The clusters of the base band that are trunks when its largest is a crown bent down to the
+    ground, or when it has no big cluster (largest first); None when neither holds.
+
+    The largest is such a crown when it is wider than a trunk (``_flat``'s width), and it and every
+    other big cluster that is no trunk is a mat (flatter than half its plan radius: stems in the band
+    span its height) with the crown rising above it (each slab of its ``columns.column`` holds
+    ``columns.MIN_SLAB`` points; ground has nothing above it). A trunk is a cluster of at least
+    ``BASE_MIN`` points whose column is full (no slab under ``GAPPY`` of the fullest, none under
+    ``MIN_SLAB``) and narrow (``columns.NARROW``). A weeping crown's leaves can outnumber a thin trunk
+    in the band, and the root then went to them (the guiding elm bent down 90 %: 0.49 of the height
+    from its trunk)."""
+    from .columns import MIN_SLAB, NARROW
+
+    if len(big) and _plan_radius(base[lab == big[0]], 90) <= 0.5 * MAX_BASE_SPREAD * h:
+        return None
+    sizes = np.bincount(lab)
+    cands = np.flatnonzero(sizes >= BASE_MIN)
+    if not len(cands):
+        return None
+    cands = cands[np.argsort(-sizes[cands], kind="stable")]
+    cols = _columns(cloud, [base[lab == c] for c in cands], h)
+    trunk = np.array([core.min() >= max(GAPPY * core.max(), MIN_SLAB) and core.sum() >= NARROW * (core.sum() + ring.sum())
+                      for core, ring in cols], bool)
+    mat = np.array([core.min() >= MIN_SLAB and np.ptp(base[lab == c, 2]) < 0.5 * _plan_radius(base[lab == c], 90)
+                    for c, (core, _) in zip(cands, cols)], bool)
+    others = np.isin(cands, big) & ~trunk
+    if not trunk.any() or not mat[others].all():
+        return None
+    return cands[trunk]
+
+
+def _columns(cloud: np.ndarray, clusters: list[np.ndarray], h: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(core, ring) of ``columns.column`` rising from each cluster of the base band: within 1.5 times
+    its 90th-percentile plan radius (at least 1 % of the height ``h``), from its lowest point."""
+    from scipy.spatial import cKDTree
+
+    from .columns import SPAN, column
+
+    low = cloud[cloud[:, 2] < min(c[:, 2].min() for c in clusters) + (BASE_BAND + SPAN) * h]
+    tree = cKDTree(low[:, :2])
+    out = []
+    for c in clusters:
+        rho = max(1.5 * _plan_radius(c, 90), 0.01 * h)
+        out.append(column(tree, low, low[:, 2], np.median(c[:, :2], axis=0), float(c[:, 2].min()), rho, h))
+    return out
+
+
 def _no_column(cloud: np.ndarray, clusters: list[np.ndarray], h: float) -> np.ndarray:
     """(C,) bool: no trunk rises from the cluster of the base band (hanging leaves reaching the ground).
 
@@ -249,18 +301,12 @@ def _no_column(cloud: np.ndarray, clusters: list[np.ndarray], h: float) -> np.nd
     on its own, so a denser neighbour does not make a tree hang. None hangs when the largest cluster
     is wider than a trunk (``_flat``'s width).
     """
-    from scipy.spatial import cKDTree
-
-    from .columns import NARROW, SPAN, column
+    from .columns import NARROW
 
     out = np.zeros(len(clusters), bool)
     if _plan_radius(clusters[0], 90) > 0.5 * MAX_BASE_SPREAD * h:  # the largest is no trunk: a crown
         return out  # bent down to the ground, whose trunk would then hang
-    low = cloud[cloud[:, 2] < min(c[:, 2].min() for c in clusters) + (BASE_BAND + SPAN) * h]
-    tree = cKDTree(low[:, :2])
-    for k, c in enumerate(clusters):
-        rho = max(1.5 * _plan_radius(c, 90), 0.01 * h)
-        core, ring = column(tree, low, low[:, 2], np.median(c[:, :2], axis=0), float(c[:, 2].min()), rho, h)
+    for k, (core, ring) in enumerate(_columns(cloud, clusters, h)):
         out[k] = core.min() < GAPPY * core.max() and core.sum() < NARROW * (core.sum() + ring.sum())
     return out
 
