@@ -178,6 +178,8 @@ def test_no_ground_no_points_removed(truth, leaf_on):
         (lambda t: np.c_[np.random.default_rng(0).uniform(-1, 1, (800, 2)),
                          np.random.default_rng(1).normal(0, 0.002, 800)], "no trunk base"),
         (lambda t: np.ones((500, 2)), r"expected an \(N, 3\)"),
+        # a tree scaled by 1e200 (a file read in the wrong format): a ValueError from scipy's distances
+        (lambda t: toy_scan(t, 3000)[0] * 1e200, "coordinates up to .* wrong format or units"),
     ],
 )
 def test_bad_input_raises_one_clear_input_error(truth, make, words):

@@ -34,6 +34,9 @@ GROUND_WIDER = 3.0
 GROUND_BELOW = 0.01
 """At most this fraction of the points lies below the ground (a plane through the underside of a crown
 has the trunk below it)."""
+MAX_COORDINATE = 1e12
+"""Largest coordinate magnitude read as a point (geocentric coordinates in millimetres stay under
+1e10); beyond it squared distances overflow float64 long before 1e154."""
 GAPPY = 0.25
 """A slab of a trunk's column holds at least this share of its fullest slab (``_no_column``)."""
 MAX_BASE_SPREAD = 0.12
@@ -80,6 +83,12 @@ def validate(points: np.ndarray, options: DecomposeOptions) -> np.ndarray:
     if finite.sum() < options.min_points:
         raise InputError(
             f"point cloud: {int(finite.sum())} usable points, need at least {options.min_points} to decompose a tree"
+        )
+    big = float(np.abs(pts[finite]).max())
+    if big > MAX_COORDINATE:
+        raise InputError(
+            f"point cloud: coordinates up to {big:.3g}, beyond {MAX_COORDINATE:.0e} in any unit; "
+            "a file read in the wrong format or units?"
         )
     if np.ptp(pts[finite, 2]) <= 0:
         raise InputError("point cloud: all points lie at one height; this is not a tree")
