@@ -3,7 +3,7 @@
 The guiding-vector elm's crown, bent down 90 % at its rim, put the root on a mat of its leaves 0.49
 of the height from the trunk, without a word; bent 95 % it was refused as "flat patches". Its
 leaves lie in mats wider than a trunk with the crown above them, and the trunk is the one full,
-narrow column among the clusters of the band (``preprocess._trunks_under_fallen_crown``).
+narrow column among the clusters of the band (``trunkbase._trunks_under_fallen_crown``).
 """
 
 from __future__ import annotations

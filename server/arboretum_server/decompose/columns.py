@@ -1,6 +1,6 @@
 """Trunk-like columns away from the root: a second tree standing higher than the first (ours).
 
-``preprocess.find_root`` refuses separate trunks in the lowest 3 % of the height. A second tree whose
+``trunkbase.find_root`` refuses separate trunks in the lowest 3 % of the height. A second tree whose
 foot stands higher (up a slope with no ground scanned, on a bank) never enters that band and would be
 decomposed as part of the first. Here every foot (the lowest point of an xy cell, lower than its
 neighbours', in the lowest ``FOOT_TOP`` of the height) more than ``SEPARATE`` of the height from the

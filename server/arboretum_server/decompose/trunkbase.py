@@ -1,0 +1,185 @@
+"""The trunk base (the root) of a cloud, and the checks that it holds one standing tree (ours).
+
+``find_root`` clusters the lowest ``BASE_BAND`` of the height and puts the root on the largest
+cluster that is a trunk. Clusters that hang from the crown (a weeping branch's leaves: ``STANDING``,
+``_no_column``) or lie on the ground (a crown bent down to it: ``_trunks_under_fallen_crown``) are
+no trunks; separate trunks are refused. A second tree standing higher than the band is
+``columns.trunk_columns``' job.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from arboretum_library.errors import InputError
+
+BASE_BAND = 0.03
+"""Height band (fraction of the tree height) whose points locate the trunk base."""
+BASE_MIN = 10
+"""The base band holds at least this many points (a flat cloud's lowest 3 % holds one or two, whose
+spread would read as a trunk's)."""
+GAPPY = 0.25
+"""A slab of a trunk's column holds at least this share of its fullest slab (``_no_column``)."""
+MAX_BASE_SPREAD = 0.12
+"""Largest 90th-percentile radius of the base band (fraction of height) that still is one trunk."""
+STANDING = 0.01
+"""A big cluster of the base band whose lowest point lies more than this fraction of the height above the
+lowest cluster's, and that holds fewer points per metre of height than ``HANGING_SHARE`` of the largest
+cluster's, hangs from the crown (a weeping branch's tips or leaves reaching into the band): it is no
+second tree."""
+HANGING_SHARE = 0.5
+"""See ``STANDING``. Points are counted per metre between a cluster's lowest point and the band's top, so
+a second trunk up a slope, whose lower part the band cuts off, still counts as a tree (and a stray point
+under the trunk, which lowers the trunk's count, makes no other cluster hang)."""
+
+
+def plan_radius(q: np.ndarray, percent: float) -> float:
+    """The ``percent``-th percentile of the plan-view distances of ``q`` (M, 3) from their median."""
+    return float(np.percentile(np.linalg.norm(q[:, :2] - np.median(q[:, :2], axis=0), axis=1), percent))
+
+
+def find_root(pts: np.ndarray, ground: np.ndarray | None = None) -> np.ndarray:
+    """(3,) trunk base of ``pts`` (N, 3): centre of the largest cluster in the lowest band, at its lowest z.
+
+    The band is the lowest ``BASE_BAND`` of the height, measured from the ``ground`` plane (a, b, c) when
+    one was found (a second tree up the slope stands in it too), else from the lowest point.
+    InputError when the band holds several well-separated trunks (clusters hanging from the crown aside:
+    ``STANDING``, ``_no_column``), or when its largest cluster spreads too wide to be one trunk base.
+    A second tree standing higher than the band is not refused here: see ``columns.trunk_columns``.
+    """
+    z = pts[:, 2]
+    h = np.ptp(z)
+    up = z if ground is None else z - (pts[:, :2] @ ground[:2] + ground[2])
+    band = np.flatnonzero(up < up.min() + BASE_BAND * h)
+    if len(band) < BASE_MIN:
+        band = np.argsort(up)[:BASE_MIN]
+    base = pts[band]
+    lab, big = _base_clusters(np.c_[base[:, :2], up[band]], h, np.c_[pts[:, :2], up])
+    trunk = base[lab == big[0]] if len(big) else base
+    centre = np.median(trunk[:, :2], axis=0)
+    r90 = plan_radius(trunk, 90)
+    if r90 > MAX_BASE_SPREAD * h:
+        raise InputError(
+            f"point cloud: no trunk base found (the lowest {BASE_BAND:.0%} of the cloud spreads "
+            f"{r90:.3g} wide for a height of {h:.3g}); crop the scan to one standing tree"
+        )
+    return np.array([centre[0], centre[1], trunk[:, 2].min()])
+
+
+def _base_clusters(base: np.ndarray, h: float, cloud: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cluster labels of the base band (links shorter than 2 % of height) and the big clusters that do
+    not hang from the crown (``STANDING``; ``_no_column`` for all but the lowest; ``cloud`` (N, 3): the
+    whole cloud), largest first. InputError when two of those lie more than 10 % of the height apart (several
+    trees). ``base`` and ``cloud`` hold x, y and the height above the ground."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(base).query_pairs(0.02 * h, output_type="ndarray")
+    adj = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(base),) * 2)
+    _, lab = connected_components(adj, directed=False)
+    sizes = np.bincount(lab)
+    big = np.flatnonzero(sizes >= max(10, 0.1 * len(base)))
+    big = big[np.argsort(-sizes[big])]
+    fallen = _trunks_under_fallen_crown(base, lab, big, cloud, h)
+    if fallen is not None:
+        big = fallen
+    elif len(big) >= 2:
+        low = np.array([base[lab == c, 2].min() for c in big])
+        dense = sizes[big] / np.maximum(base[:, 2].max() - low, 1e-9 * h)
+        hanging = (low > low.min() + STANDING * h) & (dense < HANGING_SHARE * dense[0])
+        column = _no_column(cloud, [base[lab == c] for c in big], h)
+        column[np.argmin(low)] = False  # the lowest never hangs this way (an occluded trunk beside a bush
+        hanging |= column  # is gappy and wide; weeping leaves may outnumber a thin trunk in the band)
+        big = big[~hanging]
+    if len(big) >= 2:
+        cents = np.array([np.median(base[lab == c], axis=0) for c in big])
+        sep = np.linalg.norm(cents[:, None, :2] - cents[None, :, :2], axis=2).max()
+        if sep > 0.1 * h:
+            if any(_flat(base[lab == c], h) for c in big):
+                raise InputError(
+                    f"point cloud: the lowest {BASE_BAND:.0%} of the cloud holds flat patches up to "
+                    f"{sep:.3g} apart, not trunks: ground that is not one plane (a ridge, a hollow, a "
+                    "slope over 27 degrees), or foliage lying on the ground? crop it away"
+                )
+            raise InputError(
+                f"point cloud: {len(big)} separate trunks found {sep:.3g} apart at the base; "
+                "decompose one tree at a time"
+            )
+    return lab, big
+
+
+def _trunks_under_fallen_crown(base: np.ndarray, lab: np.ndarray, big: np.ndarray, cloud: np.ndarray,
+                               h: float) -> np.ndarray | None:
+    """The clusters of the base band that are trunks when its largest is a crown bent down to the
+    ground, or when it has no big cluster (largest first); None when neither holds.
+
+    The largest is such a crown when it is wider than a trunk (``_flat``'s width), and it and every
+    other big cluster that is no trunk is a mat (flatter than half its plan radius: stems in the band
+    span its height) with the crown rising above it (each slab of its ``columns.column`` holds
+    ``columns.MIN_SLAB`` points; ground has nothing above it). A trunk is a cluster of at least
+    ``BASE_MIN`` points whose column is full (no slab under ``GAPPY`` of the fullest, none under
+    ``MIN_SLAB``) and narrow (``columns.NARROW``). A weeping crown's leaves can outnumber a thin trunk
+    in the band, and the root then went to them (the guiding elm bent down 90 %: 0.49 of the height
+    from its trunk)."""
+    from .columns import MIN_SLAB, NARROW
+
+    if len(big) and plan_radius(base[lab == big[0]], 90) <= 0.5 * MAX_BASE_SPREAD * h:
+        return None
+    sizes = np.bincount(lab)
+    cands = np.flatnonzero(sizes >= BASE_MIN)
+    if not len(cands):
+        return None
+    cands = cands[np.argsort(-sizes[cands], kind="stable")]
+    cols = _columns(cloud, [base[lab == c] for c in cands], h)
+    trunk = np.array([core.min() >= max(GAPPY * core.max(), MIN_SLAB) and core.sum() >= NARROW * (core.sum() + ring.sum())
+                      for core, ring in cols], bool)
+    mat = np.array([core.min() >= MIN_SLAB and np.ptp(base[lab == c, 2]) < 0.5 * plan_radius(base[lab == c], 90)
+                    for c, (core, _) in zip(cands, cols)], bool)
+    others = np.isin(cands, big) & ~trunk
+    if not trunk.any() or not mat[others].all():
+        return None
+    return cands[trunk]
+
+
+def _columns(cloud: np.ndarray, clusters: list[np.ndarray], h: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(core, ring) of ``columns.column`` rising from each cluster of the base band: within 1.5 times
+    its 90th-percentile plan radius (at least 1 % of the height ``h``), from its lowest point."""
+    from scipy.spatial import cKDTree
+
+    from .columns import SPAN, column
+
+    low = cloud[cloud[:, 2] < min(c[:, 2].min() for c in clusters) + (BASE_BAND + SPAN) * h]
+    tree = cKDTree(low[:, :2])
+    out = []
+    for c in clusters:
+        rho = max(1.5 * plan_radius(c, 90), 0.01 * h)
+        out.append(column(tree, low, low[:, 2], np.median(c[:, :2], axis=0), float(c[:, 2].min()), rho, h))
+    return out
+
+
+def _no_column(cloud: np.ndarray, clusters: list[np.ndarray], h: float) -> np.ndarray:
+    """(C,) bool: no trunk rises from the cluster of the base band (hanging leaves reaching the ground).
+
+    Each cluster's column (``columns.column``: within 1.5 times its 90th-percentile plan radius, up
+    ``columns.SPAN`` of the height ``h`` from its lowest point, in ``columns.SLABS`` slabs) is no
+    trunk when one of its slabs holds under ``GAPPY`` of its fullest and under ``columns.NARROW`` of
+    the column's points lie within its radius of the points within twice it. Each cluster is measured
+    on its own, so a denser neighbour does not make a tree hang. None hangs when the largest cluster
+    is wider than a trunk (``_flat``'s width).
+    """
+    from .columns import NARROW
+
+    out = np.zeros(len(clusters), bool)
+    if plan_radius(clusters[0], 90) > 0.5 * MAX_BASE_SPREAD * h:  # the largest is no trunk: a crown
+        return out  # bent down to the ground, whose trunk would then hang
+    for k, (core, ring) in enumerate(_columns(cloud, clusters, h)):
+        out[k] = core.min() < GAPPY * core.max() and core.sum() < NARROW * (core.sum() + ring.sum())
+    return out
+
+
+def _flat(cluster: np.ndarray, h: float) -> bool:
+    """A cluster of the base band that is a patch of ground: wider than half ``MAX_BASE_SPREAD`` of the
+    height ``h`` (no trunk is) and than twice its own height."""
+    r90 = plan_radius(cluster, 90)
+    return r90 > 0.5 * MAX_BASE_SPREAD * h and float(np.ptp(cluster[:, 2])) < 0.5 * r90
