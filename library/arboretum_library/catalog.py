@@ -1,12 +1,14 @@
 """The SQLite catalog of an example library: one row per example, an index over what search needs.
 
 The catalog is derived data: every row can be rebuilt from the example folder's ``meta.json`` (the
-store does so when it finds a folder without a row). It runs in WAL mode so that reader processes go on
+store does so when it finds a folder without a row, and rebuilds the whole file when ``connect`` finds it
+missing or damaged: ``CatalogDamaged``). It runs in WAL mode so that reader processes go on
 reading while one writer commits. Write transactions are ``BEGIN IMMEDIATE`` ... ``COMMIT``.
 """
 
 from __future__ import annotations
 
+import json
 import sqlite3
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -19,6 +21,7 @@ SCHEMA_VERSION = 1
 """``PRAGMA user_version`` of the catalog (and schema of meta.json, library.json)."""
 
 BUSY_TIMEOUT_MS = 30_000
+_MAGIC = b"SQLite format 3\x00"
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS examples (
@@ -70,29 +73,95 @@ class Entry:
     """UTC time the example was added, ISO 8601."""
 
 
-def connect(path: Path, *, readonly: bool, durable: bool) -> sqlite3.Connection:
-    """Open the catalog at ``path`` (autocommit; explicit transactions). Creates it unless ``readonly``."""
+class CatalogDamaged(StoreError):
+    """The catalog file is missing or damaged. A writer rebuilds it from the example folders."""
+
+    def __init__(self, path: Path, reason: str, hint: str = "") -> None:
+        self.path = path
+        self.reason = reason
+        hint = hint or ("opening the library for writing rebuilds it from the example folders "
+                        "(the damaged file is kept aside)")
+        super().__init__(f"the catalog {path} {reason}; {hint}")
+
+
+def connect(path: Path, *, readonly: bool, durable: bool, check: bool = True) -> sqlite3.Connection:
+    """Open the existing catalog at ``path`` and ``check`` it (autocommit; explicit transactions).
+
+    ``CatalogDamaged`` when it is missing, not a database, lacks the tables or fails ``quick_check``;
+    ``StoreError`` when its schema is newer than this code. Check with ``readonly`` first: a writing
+    connection may checkpoint a WAL into a damaged file (see ``recovery.open_catalog``).
+    """
+    try:
+        with open(path, "rb") as f:
+            head = f.read(len(_MAGIC))
+    except FileNotFoundError:
+        raise CatalogDamaged(path, "is missing") from None
+    except OSError as exc:
+        raise StoreError(f"{path}: cannot read the catalog ({exc.strerror or exc})") from None
+    if head != _MAGIC:
+        raise CatalogDamaged(path, "is empty" if not head else "is damaged (not an SQLite database)")
     try:
         if readonly:
             con = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True, isolation_level=None,
                                   timeout=BUSY_TIMEOUT_MS / 1000)
         else:
             con = sqlite3.connect(path, isolation_level=None, timeout=BUSY_TIMEOUT_MS / 1000)
-        con.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
-        version = con.execute("PRAGMA user_version").fetchone()[0]
-        if version > SCHEMA_VERSION:
-            con.close()
-            raise StoreError(f"{path}: catalog schema {version} is newer than this Arboretum reads ({SCHEMA_VERSION})")
+    except sqlite3.DatabaseError as exc:
+        raise StoreError(f"{path}: cannot open the catalog ({exc})") from None
+    try:
+        _check(con, path, full=check)
         if not readonly:
             con.execute("PRAGMA journal_mode = WAL")
             con.execute(f"PRAGMA synchronous = {'FULL' if durable else 'NORMAL'}")
             con.execute("PRAGMA foreign_keys = ON")
-            if version < SCHEMA_VERSION:
-                con.executescript(_SCHEMA)
-                con.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
-    except sqlite3.DatabaseError as exc:
-        raise StoreError(f"{path}: cannot open the catalog ({exc})") from None
+    except BaseException as exc:
+        con.close()
+        if isinstance(exc, sqlite3.DatabaseError):
+            raise damaged(path, exc) from None
+        raise
     return con
+
+
+def _check(con: sqlite3.Connection, path: Path, full: bool) -> None:
+    """Raise ``CatalogDamaged`` unless ``con`` is a whole catalog of this schema (``full``: also run
+    SQLite's ``quick_check``, which reads the whole file: ~ms per thousand examples)."""
+    con.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
+    version = con.execute("PRAGMA user_version").fetchone()[0]
+    if version > SCHEMA_VERSION:
+        raise StoreError(f"{path}: catalog schema {version} is newer than this Arboretum reads ({SCHEMA_VERSION})")
+    columns = [r[1] for r in con.execute("PRAGMA table_info(examples)")]
+    tag_columns = [r[1] for r in con.execute("PRAGMA table_info(tags)")]
+    if version < SCHEMA_VERSION or columns != _COLUMNS.split(", ") or tag_columns != ["tag", "id"]:
+        raise CatalogDamaged(path, "is damaged (its tables are missing or incomplete)")
+    if not full:
+        return
+    problems = [r[0] for r in con.execute("PRAGMA quick_check(3)")]
+    if problems != ["ok"]:
+        raise CatalogDamaged(path, f"is damaged ({'; '.join(problems)[:200]})")
+
+
+def create(path: Path) -> None:
+    """Write an empty catalog (WAL mode, the schema) at ``path``, which must not exist."""
+    con = sqlite3.connect(path, isolation_level=None, timeout=BUSY_TIMEOUT_MS / 1000)
+    try:
+        con.execute("PRAGMA journal_mode = WAL")
+        con.executescript(_SCHEMA)
+        con.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+    finally:
+        con.close()
+
+
+_NOT_DAMAGE = {"SQLITE_BUSY", "SQLITE_LOCKED", "SQLITE_IOERR", "SQLITE_CANTOPEN", "SQLITE_READONLY",
+               "SQLITE_FULL", "SQLITE_NOMEM", "SQLITE_PERM", "SQLITE_INTERRUPT"}
+
+
+def damaged(path: Path, exc: sqlite3.DatabaseError) -> StoreError:
+    """The user-facing error for ``exc`` raised by SQLite on the catalog at ``path``: ``CatalogDamaged``
+    when the file is damaged, a plain ``StoreError`` when it is busy or cannot be read."""
+    name = getattr(exc, "sqlite_errorname", "")
+    if name in _NOT_DAMAGE or (not name and "locked" in str(exc)):
+        return StoreError(f"{path}: the catalog cannot be used right now ({exc})")
+    return CatalogDamaged(path, f"is damaged ({exc})")
 
 
 def upsert(con: sqlite3.Connection, e: Entry) -> None:
@@ -139,9 +208,11 @@ def select(con: sqlite3.Connection, *, species: str | None = None, tags: Iterabl
     if species is not None:
         where.append("species = ?")
         args.append(species.lower())
-    for tag in tags:
-        where.append("id IN (SELECT id FROM tags WHERE tag = ?)")
-        args.append(tag.lower())
+    wanted = sorted({t.lower() for t in tags})
+    if wanted:  # one sub-query for any number of tags (one per tag overflows SQLite's expression depth)
+        where.append("id IN (SELECT id FROM tags WHERE tag IN (SELECT value FROM json_each(?)) "
+                     "GROUP BY id HAVING COUNT(*) = ?)")
+        args += [json.dumps(wanted), len(wanted)]
     for column, op, value in (("lobe_count", ">=", min_lobes), ("lobe_count", "<=", max_lobes),
                               ("curvature", ">=", min_curvature), ("curvature", "<=", max_curvature)):
         if value is not None:

@@ -12,6 +12,7 @@ import ctypes.util
 import hashlib
 import json
 import os
+import re
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -19,12 +20,13 @@ from typing import Any
 
 from .catalog import SCHEMA_VERSION, Entry
 from .codec import arrays_to_npz, flatten, npz_to_arrays, unflatten
-from .errors import StoreError, ValidationError
+from .errors import InputError, StoreError, ValidationError
 from .model import Example
 
 META = "meta.json"
 ARRAYS = "arrays.npz"
 EXAMPLE_FORMAT = "arboretum-example"
+LIBRARY_FORMAT = "arboretum-library"
 
 
 @dataclass(frozen=True)
@@ -135,6 +137,52 @@ def read_folder(folder: Path) -> Folder:
     except ValidationError as exc:
         raise StoreError(str(exc)) from None
     return Folder(example, entry_for(example, head, len(meta_bytes) + len(npz_bytes)))
+
+
+def check_marker(root: Path, create: bool) -> None:
+    """Check ``root/library.json`` (or create the library when ``create``); ``InputError`` otherwise."""
+    marker = root / "library.json"
+    if root.exists() and not root.is_dir():
+        raise InputError(f"{root} is a file, not an Arboretum library folder")
+    if not marker.exists():
+        if root.is_dir() and any(root.iterdir()) and create:
+            raise InputError(f"{root} is not an Arboretum library (no library.json) and is not empty")
+        if not create:
+            what = "is not an Arboretum library (no library.json)" if root.exists() else "does not exist"
+            raise InputError(f"library {root} {what}")
+        root.mkdir(parents=True, exist_ok=True)
+        tmp = root / f".library.json.{os.getpid()}.tmp"
+        tmp.write_text(json.dumps({"format": LIBRARY_FORMAT, "schema": SCHEMA_VERSION, "created": now_utc()}) + "\n")
+        os.replace(tmp, marker)
+        return
+    try:
+        head = json.loads(marker.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"{marker} is not readable JSON ({exc})") from None
+    if not isinstance(head, dict) or head.get("format") != LIBRARY_FORMAT:
+        raise InputError(f"{root} is not an Arboretum library ({marker} has no '{LIBRARY_FORMAT}' marker)")
+    if not isinstance(head.get("schema"), int) or head["schema"] > SCHEMA_VERSION:
+        raise InputError(f"library {root} has schema {head.get('schema')!r}, newer than this Arboretum reads ({SCHEMA_VERSION})")
+
+
+def free_ids(taken_ids: list[str], examples: Path, prefix: str, count: int) -> list[str]:
+    """``count`` ids ``PREFIX-NNNN`` after the highest number in ``taken_ids`` with that prefix, skipping
+    any with a folder in ``examples`` (``prefix`` made safe first)."""
+    prefix = re.sub(r"[^\w-]", "-", prefix).strip("-_")[:110] or "ex"
+    pattern = re.compile(re.escape(prefix) + r"-(\d+)$")
+    taken = [int(m.group(1)) for i in taken_ids if (m := pattern.match(i))]
+    out, n = [], max(taken, default=0) + 1
+    while len(out) < count:
+        if not (examples / f"{prefix}-{n:04d}").exists():
+            out.append(f"{prefix}-{n:04d}")
+        n += 1
+    return out
+
+
+def read_revision(folder: Path) -> str:
+    """Hex SHA-256 of ``folder/meta.json`` (which holds the arrays' SHA-256, so it names the whole example
+    version). ``FileNotFoundError`` when there is none."""
+    return hashlib.sha256((folder / META).read_bytes()).hexdigest()
 
 
 _RENAME_EXCHANGE = 2

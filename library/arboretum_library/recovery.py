@@ -5,24 +5,30 @@ operation and the id, then renames whole folders and commits the catalog, then r
 Writers hold the library's lock file while they do so, so a writer that finds anything in ``.tmp/``
 while holding the lock knows it is a crash leftover and calls ``reconcile``, which finishes or undoes
 each journalled operation, empties ``.tmp/``, re-indexes orphan folders (or moves broken ones to
-``LIB/quarantine/``) and drops rows whose folder is gone.
+``LIB/quarantine/``) and drops rows whose folder is gone. ``open_catalog`` rebuilds a missing or damaged
+catalog from the folders (keeping the damaged file aside); ``wait_for_lock`` takes the lock with a deadline.
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import secrets
 import shutil
 import sqlite3
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import catalog
 from .errors import StoreError
-from .folders import fsync_path, read_folder, write_bytes
+from .folders import fsync_path, now_utc, read_folder, valid_id, write_bytes
 
 JOURNAL_PREFIX = "journal-"
+CATALOG = "catalog.sqlite"
+_FRESH_PREFIX = ".catalog-new-"
 
 
 @dataclass
@@ -37,6 +43,18 @@ class Recovery:
     """Ids whose catalog row was removed because their folder is gone."""
     cleaned: int = 0
     """Entries removed from ``.tmp/``."""
+    catalog_problem: str = ""
+    """Why the catalog was rebuilt from the folders ('is missing', 'is damaged (...)'); '' when it was not."""
+    catalog_kept: str = ""
+    """Where the damaged catalog file was moved ('' when none was)."""
+
+    def merge(self, other: Recovery) -> Recovery:
+        """This report with ``other``'s findings appended."""
+        self.reindexed += other.reindexed
+        self.quarantined += other.quarantined
+        self.dropped += other.dropped
+        self.cleaned += other.cleaned
+        return self
 
 
 def unique(prefix: str) -> str:
@@ -44,10 +62,14 @@ def unique(prefix: str) -> str:
     return f"{prefix}{os.getpid()}-{secrets.token_hex(6)}"
 
 
-def write_journal(tmp: Path, op: str, id_: str, aside: str | None, durable: bool) -> Path:
-    """Record that ``op`` on ``id_`` is under way (``aside``: where a replaced folder was moved)."""
+def write_journal(tmp: Path, op: str, id_: str, aside: str | None, durable: bool,
+                  ids: list[str] | None = None) -> Path:
+    """Record that ``op`` on ``id_`` is under way (``aside``: where a replaced folder was moved).
+
+    ``op`` "add_group" with ``ids``: examples added all or none; a crash rolls every one of them back.
+    """
     path = tmp / f"{unique(JOURNAL_PREFIX)}.json"
-    write_bytes(path, json.dumps({"op": op, "id": id_, "aside": aside}).encode(), durable)
+    write_bytes(path, json.dumps({"op": op, "id": id_, "aside": aside, "ids": ids}).encode(), durable)
     if durable:
         fsync_path(tmp)
     return path
@@ -76,7 +98,12 @@ def _index_folder(con: sqlite3.Connection, folder: Path, report: Recovery) -> bo
 def _finish(con: sqlite3.Connection, root: Path, journal: dict, report: Recovery) -> None:
     """Complete (or roll back) one journalled operation."""
     id_, op = journal.get("id"), journal.get("op")
-    if not isinstance(id_, str) or "/" in id_ or id_ in ("", ".", ".."):
+    if op == "add_group" and isinstance(journal.get("ids"), list):
+        for one in journal["ids"]:  # roll the whole group back
+            if isinstance(one, str) and valid_id(one):
+                _finish(con, root, {"op": "delete", "id": one}, report)
+        return
+    if not isinstance(id_, str) or not valid_id(id_):
         return
     target = root / "examples" / id_
     if op == "delete":
@@ -151,3 +178,71 @@ def reconcile(con: sqlite3.Connection, root: Path, full: bool) -> Recovery:
             con.execute("COMMIT")
             report.dropped.extend(gone)
     return report
+
+
+def wait_for_lock(fd: int, timeout: float | None, on_wait: Callable[[], None] | None = None) -> bool:
+    """Take an exclusive ``flock`` on ``fd``, polling; False when ``timeout`` seconds (None: never)
+    passed first. ``on_wait`` is called once when the lock is found taken. Ctrl-C interrupts the wait."""
+    deadline = None if timeout is None else time.monotonic() + max(timeout, 0.0)
+    delay = 0.005
+    while True:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return True
+        except BlockingIOError:
+            pass
+        left = None if deadline is None else deadline - time.monotonic()
+        if left is not None and left <= 0:
+            return False
+        if on_wait is not None:
+            on_wait()
+            on_wait = None
+        time.sleep(delay if left is None else min(delay, left))
+        delay = min(delay * 2, 0.1)
+
+
+def open_catalog(root: Path, durable: bool, report: Recovery) -> sqlite3.Connection:
+    """Connect to ``root/catalog.sqlite`` for writing (call with the write lock held); when it is missing
+    or damaged, move what is left of it aside (``catalog.sqlite.damaged-TIME``), build a new one from the
+    example folders under a temporary name and rename it into place, so readers never see it half-built."""
+    db = root / CATALOG
+    try:
+        catalog.connect(db, readonly=True, durable=durable).close()  # leaves a damaged file as it is
+        return catalog.connect(db, readonly=False, durable=durable, check=False)
+    except catalog.CatalogDamaged as exc:
+        leftovers = [p for p in (db, *_sidecars(db)) if p.exists()]
+        if leftovers or any((root / "examples").iterdir()):
+            report.catalog_problem = exc.reason
+        if leftovers:
+            report.catalog_kept = str(_move_aside(db))
+    for old in root.glob(f"{_FRESH_PREFIX}*"):  # a rebuild that crashed (derived data: safe to drop)
+        old.unlink()
+    fresh = root / unique(_FRESH_PREFIX)
+    catalog.create(fresh)
+    con = catalog.connect(fresh, readonly=False, durable=durable)
+    try:
+        report.merge(reconcile(con, root, full=True))
+    finally:
+        con.close()  # checkpoints and removes its WAL, so the file is whole under its new name
+    os.replace(fresh, db)
+    if durable:
+        fsync_path(root)
+    return catalog.connect(db, readonly=False, durable=durable, check=False)
+
+
+def _sidecars(db: Path) -> tuple[Path, Path]:
+    return db.with_name(db.name + "-wal"), db.with_name(db.name + "-shm")
+
+
+def _move_aside(db: Path) -> Path:
+    """Rename the catalog and its WAL files to ``catalog.sqlite.damaged-TIME[-N]`` (kept, never deleted)."""
+    stamp = now_utc().replace("-", "").replace(":", "")
+    kept = db.with_name(f"{db.name}.damaged-{stamp}")
+    n = 1
+    while kept.exists() or any(p.exists() for p in _sidecars(kept)):
+        n += 1
+        kept = db.with_name(f"{db.name}.damaged-{stamp}-{n}")
+    for src, dst in zip((db, *_sidecars(db)), (kept, *_sidecars(kept)), strict=True):
+        if src.exists():
+            os.rename(src, dst)
+    return kept

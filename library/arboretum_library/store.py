@@ -3,14 +3,16 @@
 Layout::
 
     LIB/library.json            format marker and schema version
-    LIB/catalog.sqlite          the index (WAL mode; derived from the folders, rebuilt if lost)
+    LIB/catalog.sqlite          the index (WAL mode; derived from the folders, rebuilt if lost or damaged)
     LIB/examples/<id>/          meta.json + arrays.npz of one example
     LIB/.tmp/                   staging folders and write journals (empty when no write is under way)
     LIB/.lock                   held (flock) by a process while it writes
     LIB/quarantine/             broken folders found when reconciling
 
 A ``Library`` holds a path and one SQLite connection; use one per thread. Any number of processes can
-read while one writes; writers take turns through the lock file.
+read while one writes; writers take turns through the lock file, each waiting at most ``lock_timeout``
+seconds for it (then ``LibraryBusy``). A reader finding the catalog missing or damaged raises
+``CatalogDamaged``; a writer rebuilds it from the folders and reconnects when another process did.
 """
 
 from __future__ import annotations
@@ -19,10 +21,9 @@ import contextlib
 import fcntl
 import json
 import os
-import re
 import shutil
 import sqlite3
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import replace as with_fields
 from pathlib import Path
 
@@ -30,63 +31,96 @@ import numpy as np
 
 from . import catalog
 from . import search as _search
-from .catalog import SCHEMA_VERSION, Entry
+from .catalog import SCHEMA_VERSION, CatalogDamaged, Entry
 from .descriptors import CURVATURE_TAGS, relative_curvature_tags, tercile_bounds
-from .errors import InputError, StoreError
+from .errors import StoreError
 from .folders import (
+    check_marker,
     encode,
     entry_for,
     exchange,
+    free_ids,
     fsync_path,
-    now_utc,
     read_folder,
+    read_revision,
     valid_id,
     write_folder,
 )
 from .model import Example
 from .progress import ProgressFn, no_progress
-from .recovery import Recovery, reconcile, unique, write_journal
+from .recovery import (
+    CATALOG,
+    Recovery,
+    open_catalog,
+    reconcile,
+    unique,
+    wait_for_lock,
+    write_journal,
+)
 
-LIBRARY_FORMAT = "arboretum-library"
+LOCK_TIMEOUT_S = 10.0
+"""How long a writer waits for another process's write lock by default before ``LibraryBusy``."""
+
+__all__ = ["CatalogDamaged", "Library", "LibraryBusy", "LOCK_TIMEOUT_S"]
+
+
+class LibraryBusy(StoreError):
+    """Another process held the library's write lock for longer than this one would wait."""
+
+    code = "busy"
 
 
 class Library:
     """An open example library. Create with ``Library.open``; close with ``close()`` or ``with``."""
 
-    def __init__(self, root: Path, con: sqlite3.Connection, readonly: bool, durable: bool) -> None:
+    def __init__(self, root: Path, readonly: bool, durable: bool, lock_timeout: float | None = LOCK_TIMEOUT_S,
+                 on_wait: Callable[[str], None] | None = None) -> None:
         self.root = root
-        self._con = con
+        self._con: sqlite3.Connection | None = None
+        self._ident: tuple[int, int] | None = None
+        self._broken = False
+        self._held = False
         self.readonly = readonly
         self.durable = durable
+        self.lock_timeout = lock_timeout
+        """Seconds a write waits for another process's lock (None: as long as it takes)."""
+        self.on_wait = on_wait
+        """Called with a message when a write has to wait for the lock (e.g. to tell a CLI user)."""
         self.recovered = Recovery()
         """What reconciling did when this (writing) library was opened."""
 
     # -- opening -----------------------------------------------------------------------------
     @classmethod
     def open(cls, path: str | os.PathLike, create: bool = False, *, readonly: bool = False,
-             fsync: bool = True) -> Library:
+             fsync: bool = True, lock_timeout: float | None = LOCK_TIMEOUT_S,
+             on_wait: Callable[[str], None] | None = None) -> Library:
         """Open the library at ``path`` (``create``: make it if missing). ``InputError`` if it is not one.
 
-        ``readonly`` opens never write or reconcile; ``fsync`` makes every write durable on power loss.
+        ``readonly`` opens never write or reconcile (``CatalogDamaged`` when the catalog is missing or
+        damaged); a writing open rebuilds such a catalog from the folders. ``fsync`` makes every write
+        durable on power loss. ``lock_timeout``, ``on_wait``: see the attributes.
         """
         root = Path(path)
-        _check_marker(root, create and not readonly)
-        con = catalog.connect(root / "catalog.sqlite", readonly=readonly, durable=fsync)
-        lib = cls(root, con, readonly, fsync)
+        check_marker(root, create and not readonly)
+        lib = cls(root, readonly, fsync, lock_timeout, on_wait)
         if readonly:
+            lib._connect()
             return lib
+        for sub in ("examples", ".tmp"):
+            (root / sub).mkdir(exist_ok=True)
         try:
-            for sub in ("examples", ".tmp"):
-                (root / sub).mkdir(exist_ok=True)
             with lib._lock(finish_crashed=False):
-                lib.recovered = reconcile(con, root, full=True)
+                lib._connect(locked=True)
+                lib.recovered.merge(reconcile(lib._con, root, full=True))
         except BaseException:
-            con.close()
+            lib.close()
             raise
         return lib
 
     def close(self) -> None:
-        self._con.close()
+        if self._con is not None:
+            self._con.close()
+            self._con = None
 
     def __enter__(self) -> Library:
         return self
@@ -97,17 +131,17 @@ class Library:
     # -- reading -----------------------------------------------------------------------------
     def ids(self) -> list[str]:
         """Every example id, sorted."""
-        return catalog.ids(self._con)
+        return self._read(catalog.ids)
 
     def __len__(self) -> int:
-        return self._con.execute("SELECT COUNT(*) FROM examples").fetchone()[0]
+        return self._read(lambda con: con.execute("SELECT COUNT(*) FROM examples").fetchone()[0])
 
     def __contains__(self, id_: object) -> bool:
-        return isinstance(id_, str) and catalog.get(self._con, id_) is not None
+        return isinstance(id_, str) and self._read(lambda con: catalog.get(con, id_)) is not None
 
     def entry(self, id_: str) -> Entry:
         """The catalog row of ``id_`` (no arrays loaded), with the library's 'straight'/'curved' (``entries``)."""
-        e = catalog.get(self._con, id_)
+        e = self._read(lambda con: catalog.get(con, id_))
         if e is None:
             raise StoreError(f"no example {id_!r} in library {self.root}")
         return self._relative([e])[0]
@@ -122,14 +156,15 @@ class Library:
         tags = filters.get("tags") or ()
         want = tuple(t.lower() for t in ((tags,) if isinstance(tags, str) else tags))
         filters["tags"] = tuple(t for t in want if t not in CURVATURE_TAGS)
-        rows = self._relative(catalog.select(self._con, **filters))
+        rows = self._relative(self._read(lambda con: catalog.select(con, **filters)))
         return [e for e in rows if all(t in e.tags for t in want if t in CURVATURE_TAGS)]
 
     def _relative(self, rows: list[Entry]) -> list[Entry]:
         """``rows`` with 'straight'/'curved' decided by the terciles of their species in the library."""
         if not rows:
             return rows
-        bounds = {k: tercile_bounds(np.array(v)) for k, v in catalog.curvature_by_species(self._con).items()}
+        by_species = self._read(catalog.curvature_by_species)
+        bounds = {k: tercile_bounds(np.array(v)) for k, v in by_species.items()}
         return [with_fields(e, tags=relative_curvature_tags(e.tags, e.descriptors.curvature, bounds.get(e.species)))
                 for e in rows]
 
@@ -140,13 +175,24 @@ class Library:
             raise StoreError(f"no example {id_!r} in library {self.root}")
         return read_folder(folder).example
 
+    def revision(self, id_: str) -> str:
+        """A token that changes whenever example ``id_`` is replaced (SHA-256 of its meta.json, which holds
+        the arrays' SHA-256): cheap to check against a cached copy. ``StoreError`` when it is missing."""
+        folder = self._folder(id_)
+        try:
+            return read_revision(folder)
+        except (FileNotFoundError, NotADirectoryError):
+            raise StoreError(f"no example {id_!r} in library {self.root}") from None
+        except OSError as exc:
+            raise StoreError(f"cannot read {exc.filename}: {exc.strerror}") from None
+
     def find_source(self, source_sha256: str) -> list[str]:
         """Ids of the examples decomposed from the scan with this content hash."""
-        return catalog.with_source(self._con, source_sha256.lower())
+        return self._read(lambda con: catalog.with_source(con, source_sha256.lower()))
 
     def info(self) -> dict:
         """Counts per species and tag, number of examples, bytes of example folders."""
-        info = catalog.summary(self._con)
+        info = self._read(catalog.summary)
         counts = {k: v for k, v in info["tags"].items() if k not in CURVATURE_TAGS}
         for e in self.entries():
             for t in e.tags:
@@ -160,14 +206,14 @@ class Library:
         return _search.rank(self.entries(**filters), _search.parse_terms(query), limit)
 
     def new_id(self, prefix: str = "ex") -> str:
-        """An unused id ``PREFIX-NNNN`` (one more than the highest number in use with that prefix)."""
-        prefix = re.sub(r"[^\w-]", "-", prefix).strip("-_")[:110] or "ex"
-        pattern = re.compile(re.escape(prefix) + r"-(\d+)$")
-        taken = [int(m.group(1)) for i in self.ids() if (m := pattern.match(i))]
-        n = max(taken, default=0) + 1
-        while (self.root / "examples" / f"{prefix}-{n:04d}").exists():
-            n += 1
-        return f"{prefix}-{n:04d}"
+        """An unused id ``PREFIX-NNNN`` (one more than the highest number in use with that prefix).
+
+        Another process may take it before you ``add`` it: to store new examples, use ``add_new``.
+        """
+        return self._free_ids(prefix, 1)[0]
+
+    def _free_ids(self, prefix: str, count: int) -> list[str]:
+        return free_ids(self.ids(), self.root / "examples", prefix, count)
 
     # -- writing -----------------------------------------------------------------------------
     def add(self, example: Example, *, replace: bool = False) -> str:
@@ -184,23 +230,50 @@ class Library:
             progress(len(done), max(total, len(done)), "adding examples")
         return done
 
+    def add_new(self, examples: Iterable[Example], prefix: str = "ex") -> list[Example]:
+        """Store ``examples`` under fresh ids ``PREFIX-NNNN`` picked while holding the write lock (so two
+        processes never pick the same), all or none: a failure (or Ctrl-C) takes back the ones already
+        stored, and a crash leaves a journal that the next writer uses to do so. Returns them renamed."""
+        self._writable()
+        todo = list(examples)
+        with self._lock():
+            ids = self._free_ids(prefix, len(todo))
+            out = [with_fields(ex, id=i) for ex, i in zip(todo, ids, strict=True)]
+            group = write_journal(self.root / ".tmp", "add_group", "", None, self.durable, ids=ids)
+            try:
+                for ex in out:
+                    self.add(ex)
+            except BaseException:
+                for id_ in reversed(ids):  # if this fails too, the group journal makes the next writer do it
+                    if self._folder(id_).exists() or catalog.get(self._con, id_) is not None:
+                        self._delete(id_)
+                group.unlink()
+                raise
+            group.unlink()
+        return out
+
     def put_encoded(self, example: Example, meta: bytes, npz: bytes, *, replace: bool = False) -> str:
         """Store ``example`` whose files ``encode`` produced (``meta``, ``npz``) atomically."""
         self._writable()
-        target = self._folder(example.id)
+        self._folder(example.id)
         with self._lock():
-            exists = target.exists() or catalog.get(self._con, example.id) is not None
-            if exists and not replace:
-                raise StoreError(f"example {example.id!r} already exists in library {self.root}")
-            stage = self.root / ".tmp" / unique("stage-")
-            write_folder(stage, meta, npz, self.durable)
-            entry = entry_for(example, json.loads(meta), len(meta) + len(npz))
-            old, journal = self._swap_in(stage, target, example.id)
-            self._commit(lambda: catalog.upsert(self._con, entry))
-            if old is not None:
-                shutil.rmtree(old)
-            journal.unlink()
+            self._put(example, meta, npz, replace=replace)
         return example.id
+
+    def _put(self, example: Example, meta: bytes, npz: bytes, *, replace: bool) -> None:
+        """``put_encoded`` with the lock held."""
+        target = self._folder(example.id)
+        exists = target.exists() or catalog.get(self._con, example.id) is not None
+        if exists and not replace:
+            raise StoreError(f"example {example.id!r} already exists in library {self.root}")
+        stage = self.root / ".tmp" / unique("stage-")
+        write_folder(stage, meta, npz, self.durable)
+        entry = entry_for(example, json.loads(meta), len(meta) + len(npz))
+        old, journal = self._swap_in(stage, target, example.id)
+        self._commit(lambda: catalog.upsert(self._con, entry))
+        if old is not None:
+            shutil.rmtree(old)
+        journal.unlink()
 
     def delete(self, id_: str) -> None:
         """Remove example ``id_`` (catalog row first, then its folder)."""
@@ -209,13 +282,18 @@ class Library:
         with self._lock():
             if not target.exists() and catalog.get(self._con, id_) is None:
                 raise StoreError(f"no example {id_!r} in library {self.root}")
-            journal = write_journal(self.root / ".tmp", "delete", id_, None, self.durable)
-            self._commit(lambda: catalog.remove(self._con, [id_]))
-            if target.exists():
-                trash = self.root / ".tmp" / unique("trash-")
-                os.rename(target, trash)
-                shutil.rmtree(trash)
-            journal.unlink()
+            self._delete(id_)
+
+    def _delete(self, id_: str) -> None:
+        """``delete`` with the lock held."""
+        target = self._folder(id_)
+        journal = write_journal(self.root / ".tmp", "delete", id_, None, self.durable)
+        self._commit(lambda: catalog.remove(self._con, [id_]))
+        if target.exists():
+            trash = self.root / ".tmp" / unique("trash-")
+            os.rename(target, trash)
+            shutil.rmtree(trash)
+        journal.unlink()
 
     # -- archives ----------------------------------------------------------------------------
     def export_archive(self, path: str | os.PathLike, progress: ProgressFn = no_progress) -> dict:
@@ -243,15 +321,71 @@ class Library:
 
     @contextlib.contextmanager
     def _lock(self, finish_crashed: bool = True) -> Iterator[None]:
-        """Hold the library's write lock; finish any crashed write found in ``.tmp/`` first."""
+        """Hold the library's write lock (waiting at most ``lock_timeout``, else ``LibraryBusy``); then
+        reconnect if the catalog was replaced or damaged and finish any crashed write found in ``.tmp/``.
+        Re-entrant: inside a held lock (``add_new`` calling ``add``) it just goes on."""
+        if self._held:
+            yield
+            return
         with open(self.root / ".lock", "a+b") as f:
-            fcntl.flock(f.fileno(), fcntl.LOCK_EX)
+            waiting = f"waiting for the library {self.root}: another process is writing it (Ctrl-C to stop)"
+            on_wait = (lambda: self.on_wait(waiting)) if self.on_wait is not None else None
+            if not wait_for_lock(f.fileno(), self.lock_timeout, on_wait):
+                raise LibraryBusy(f"the library {self.root} is being written by another process "
+                                  f"(waited {self.lock_timeout:g} s); try again")
+            self._held = True
             try:
-                if finish_crashed and any((self.root / ".tmp").iterdir()):
-                    reconcile(self._con, self.root, full=False)
+                if finish_crashed:
+                    self._sync(locked=True)
+                    if any((self.root / ".tmp").iterdir()):
+                        reconcile(self._con, self.root, full=False)
                 yield
+            except sqlite3.DatabaseError as exc:
+                raise self._damaged(exc) from None
             finally:
+                self._held = False
                 fcntl.flock(f.fileno(), fcntl.LOCK_UN)
+
+    # -- the catalog connection --------------------------------------------------------------
+    def _connect(self, locked: bool = False) -> None:
+        """(Re)connect to the catalog; a writer holding the lock (``locked``) rebuilds it when it is
+        missing or damaged, anyone else gets ``CatalogDamaged``."""
+        db = self.root / CATALOG
+        ident = _ident(db)
+        if self._con is not None:
+            self._con.close()
+            self._con = None
+        self._broken = True
+        if locked and not self.readonly:
+            self._con = open_catalog(self.root, self.durable, self.recovered)
+            ident = _ident(db)
+        else:
+            self._con = catalog.connect(db, readonly=self.readonly, durable=self.durable)
+        self._ident, self._broken = ident, False
+
+    def _sync(self, locked: bool = False) -> None:
+        """Reconnect when another process replaced (rebuilt) the catalog file, or after damage."""
+        if self._broken or self._con is None or _ident(self.root / CATALOG) != self._ident:
+            self._connect(locked)
+
+    def _read(self, query: Callable[[sqlite3.Connection], object]):
+        """``query(con)`` on a current catalog; a writer rebuilds a damaged catalog once and retries."""
+        for attempt in range(2):
+            try:
+                self._sync()
+                return query(self._con)
+            except (sqlite3.DatabaseError, CatalogDamaged) as exc:
+                err = exc if isinstance(exc, CatalogDamaged) else self._damaged(exc)
+                if self.readonly or attempt or not isinstance(err, CatalogDamaged):
+                    raise err from None
+                self._broken = True
+                with self._lock():  # takes the lock and rebuilds
+                    pass
+
+    def _damaged(self, exc: sqlite3.DatabaseError) -> StoreError:
+        err = catalog.damaged(self.root / CATALOG, exc)
+        self._broken = self._broken or isinstance(err, CatalogDamaged)
+        return err
 
     def _swap_in(self, stage: Path, target: Path, id_: str) -> tuple[Path | None, Path]:
         """Rename the staged folder to ``target``; returns where the replaced folder went, the journal."""
@@ -283,27 +417,10 @@ class Library:
         self._con.execute("COMMIT")
 
 
-def _check_marker(root: Path, create: bool) -> None:
-    """Check ``root/library.json`` (or create the library when ``create``); ``InputError`` otherwise."""
-    marker = root / "library.json"
-    if root.exists() and not root.is_dir():
-        raise InputError(f"{root} is a file, not an Arboretum library folder")
-    if not marker.exists():
-        if root.is_dir() and any(root.iterdir()) and create:
-            raise InputError(f"{root} is not an Arboretum library (no library.json) and is not empty")
-        if not create:
-            what = "is not an Arboretum library (no library.json)" if root.exists() else "does not exist"
-            raise InputError(f"library {root} {what}")
-        root.mkdir(parents=True, exist_ok=True)
-        tmp = root / f".library.json.{os.getpid()}.tmp"
-        tmp.write_text(json.dumps({"format": LIBRARY_FORMAT, "schema": SCHEMA_VERSION, "created": now_utc()}) + "\n")
-        os.replace(tmp, marker)
-        return
+def _ident(path: Path) -> tuple[int, int] | None:
+    """(device, inode) of ``path``, None when missing: tells whether another process replaced the file."""
     try:
-        head = json.loads(marker.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"{marker} is not readable JSON ({exc})") from None
-    if not isinstance(head, dict) or head.get("format") != LIBRARY_FORMAT:
-        raise InputError(f"{root} is not an Arboretum library ({marker} has no '{LIBRARY_FORMAT}' marker)")
-    if not isinstance(head.get("schema"), int) or head["schema"] > SCHEMA_VERSION:
-        raise InputError(f"library {root} has schema {head.get('schema')!r}, newer than this Arboretum reads ({SCHEMA_VERSION})")
+        st = os.stat(path)
+    except FileNotFoundError:
+        return None
+    return st.st_dev, st.st_ino

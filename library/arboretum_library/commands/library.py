@@ -14,6 +14,7 @@ Every subcommand takes ``--json``. Missing or foreign libraries and archives exi
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from typing import Any
 
 from arboretum_library.cli import add_json_flag, emit, register_extensions
@@ -58,10 +59,34 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _open(path: str, readonly: bool = True):
-    from arboretum_library.store import Library
+def _tell(message: str) -> None:
+    import sys
 
-    return Library.open(path, readonly=readonly)
+    print(message, file=sys.stderr, flush=True)
+
+
+def _open(path: str, readonly: bool = True, create: bool = False):
+    """The library at ``path``. Writers wait for another process writing it as long as it takes, saying
+    so on stderr (Ctrl-C stops them). A reader finding the catalog missing or damaged rebuilds it from
+    the example folders as a writer would (the damaged file is kept aside) and says so on stderr; when
+    it cannot write the library, one error names the file and what to do."""
+    from arboretum_library.errors import StoreError
+    from arboretum_library.store import CatalogDamaged, Library
+
+    try:
+        lib = Library.open(path, create, readonly=readonly, lock_timeout=None, on_wait=_tell)
+    except CatalogDamaged as exc:
+        try:  # as a writer, which rebuilds it
+            lib = Library.open(path, lock_timeout=None, on_wait=_tell)
+        except OSError as why:
+            where = f": {why.filename}" if why.filename else ""
+            raise StoreError(f"{exc}, but this process cannot write the library ({why.strerror or why}{where})") from None
+    r = lib.recovered
+    if r.catalog_problem:
+        kept = f"; the damaged file is kept as {r.catalog_kept}" if r.catalog_kept else ""
+        _tell(f"the catalog {lib.root / 'catalog.sqlite'} {r.catalog_problem}: rebuilt it from the example "
+              f"folders ({len(lib)} examples{kept})")
+    return lib
 
 
 def _counts(counts: dict[str, int]) -> str:
@@ -155,10 +180,12 @@ def _export(args: argparse.Namespace) -> tuple[dict, str]:
 
 
 def _import(args: argparse.Namespace) -> tuple[dict, str]:
-    from arboretum_library.archive import import_archive
+    from arboretum_library.archive import apply_archive, check_archive
     from arboretum_library.progress import StatusLine
 
-    report = import_archive(args.archive, args.library, on_conflict=args.on_conflict, progress=StatusLine())
+    checked = check_archive(Path(args.archive))  # the whole archive, before the library is touched
+    with _open(args.library, readonly=False, create=True) as lib:
+        report = apply_archive(lib, checked, args.on_conflict, progress=StatusLine())
     data = report.as_dict()
     text = (f"imported {args.archive} into {args.library}: added {len(report.added)}, "
             f"replaced {len(report.replaced)}, renamed {len(report.renamed)}, skipped {len(report.skipped)}")

@@ -132,28 +132,16 @@ def _save_hbl(path: str, hbl) -> None:
 
 
 def _store(lib, dec, scan: str, options) -> tuple[list, list[str]]:
-    """(examples, ids stored): a tree goes into ``lib`` whole or not at all (Ctrl-C or a failed write
-    takes back every id this run handed out that made it into the library)."""
+    """(examples, ids stored): a tree goes into ``lib`` whole or not at all (``Library.add_new`` picks
+    the ids under the write lock and takes back what it stored when a write fails or Ctrl-C comes)."""
     from .examples import counter_ids, make_examples, provenance
 
     prov = provenance(scan, options)
     if lib is None:
         return make_examples(dec.hbl, prov, counter_ids("example")), []
     stem = os.path.splitext(os.path.basename(scan))[0]
-    handed: list[str] = []
-    stored: list[str] = []
-
-    def new_id() -> str:
-        handed.append(lib.new_id(stem))
-        return handed[-1]
-
-    try:
-        return make_examples(dec.hbl, prov, new_id, lambda e: stored.append(lib.add(e))), stored
-    except BaseException:
-        for id_ in handed:
-            if id_ in lib:
-                lib.delete(id_)
-        raise
+    examples = lib.add_new(make_examples(dec.hbl, prov, counter_ids("new")), stem)
+    return examples, [e.id for e in examples]
 
 
 def _check_output(path: str | None) -> None:

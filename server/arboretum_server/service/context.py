@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -13,7 +14,11 @@ from arboretum_server.assembly.recombine import RecombineOptions
 
 from .sessions import Sessions
 
+log = logging.getLogger(__name__)
+
 EXAMPLE_CACHE = 256
+LOCK_TIMEOUT_S = 1.0
+"""How long the loop thread waits for another process's library write lock before answering ``busy``."""
 
 
 @dataclass
@@ -27,6 +32,8 @@ class Context:
     """Request types the dispatcher handles (for the handshake)."""
     warming: bool = False
     """True while the warm-up thread imports the heavy modules (set and cleared by ``arboretum serve``)."""
+    lock_timeout: float = LOCK_TIMEOUT_S
+    """Seconds a library write (or the first open, which reconciles) waits for another writer."""
     _library: Library | None = None
     _examples: OrderedDict = field(default_factory=OrderedDict)
 
@@ -35,19 +42,27 @@ class Context:
         if self.library_path is None:
             raise InputError("this server has no example library (start it with --library LIB)")
         if self._library is None:
-            self._library = Library.open(self.library_path, create=True)
+            self._library = Library.open(self.library_path, create=True, lock_timeout=self.lock_timeout)
+            r = self._library.recovered
+            if r.catalog_problem:
+                log.warning("the catalog of %s %s: rebuilt it from the example folders (old file: %s)",
+                            self.library_path, r.catalog_problem, r.catalog_kept or "none")
         return self._library
 
     def example(self, example_id: str) -> Example:
-        """Library example ``example_id`` (cached; examples never change under an id but by delete)."""
-        ex = self._examples.get(example_id)
-        if ex is None:
-            ex = self.library().get(example_id)
-            self._examples[example_id] = ex
-            if len(self._examples) > EXAMPLE_CACHE:
-                self._examples.popitem(last=False)
-        else:
+        """Library example ``example_id``, cached by its revision (another process may replace or delete
+        it: each call checks the revision, a read of its small meta.json, and reloads when it changed)."""
+        lib = self.library()
+        revision = lib.revision(example_id)
+        hit = self._examples.get(example_id)
+        if hit is not None and hit[0] == revision:
             self._examples.move_to_end(example_id)
+            return hit[1]
+        ex = lib.get(example_id)
+        self._examples[example_id] = (revision, ex)
+        self._examples.move_to_end(example_id)
+        if len(self._examples) > EXAMPLE_CACHE:
+            self._examples.popitem(last=False)
         return ex
 
     def forget(self, example_id: str) -> None:
