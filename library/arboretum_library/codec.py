@@ -13,6 +13,11 @@ import functools
 import io
 import json
 import os
+import struct
+import threading
+import tokenize
+import zipfile
+import zlib
 from collections.abc import Mapping
 from enum import IntEnum
 from pathlib import Path
@@ -61,7 +66,7 @@ def unflatten(cls: type[T], meta: Any, arrays: Mapping[str, np.ndarray]) -> T:
     def dec(tp: Any, v: Any, where: str) -> Any:
         if isinstance(v, dict) and ARRAY in v:
             key = v[ARRAY]
-            if key not in arrays:
+            if not isinstance(key, str) or key not in arrays:
                 raise ValidationError(f"{where}: array {key!r} is missing")
             return arrays[key]
         if isinstance(tp, type) and dataclasses.is_dataclass(tp):
@@ -72,7 +77,7 @@ def unflatten(cls: type[T], meta: Any, arrays: Mapping[str, np.ndarray]) -> T:
             kwargs = {k: dec(hints[k], x, f"{where}.{k}") for k, x in v.items() if k in known}
             try:
                 return tp(**kwargs)
-            except TypeError as exc:
+            except (TypeError, OverflowError) as exc:
                 raise ValidationError(f"{where}: {exc}") from None
         origin = get_origin(tp)
         if origin is tuple:
@@ -82,12 +87,25 @@ def unflatten(cls: type[T], meta: Any, arrays: Mapping[str, np.ndarray]) -> T:
             return tuple(dec(elem, x, f"{where}[{i}]") for i, x in enumerate(v))
         if tp in (int, float, str, bool) or (isinstance(tp, type) and issubclass(tp, IntEnum)):
             try:
-                return tp(v)
-            except (TypeError, ValueError):
+                return tp(_integer(v, where)) if tp is int or issubclass(tp, IntEnum) else tp(v)
+            except (TypeError, ValueError, OverflowError):
                 raise ValidationError(f"{where}: {v!r} is not a valid {tp.__name__}") from None
         return v
 
     return dec(cls, meta, cls.__name__)
+
+
+MAX_INT = (1 << 63) - 1
+"""Largest integer a record field takes (int64): anything beyond cannot be an index or a count."""
+
+
+def _integer(v: Any, where: str) -> int:
+    """``v`` as an int: an integer, or a float with an integral value, within int64; else ``ValidationError``."""
+    n = int(v) if isinstance(v, float) and v.is_integer() else v
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or abs(int(n)) > MAX_INT:
+        shown = f"{v:.6g}" if isinstance(v, float | int) and not isinstance(v, bool) else repr(v)[:60]
+        raise ValidationError(f"{where}: {shown} is not a valid integer (a whole number within int64)")
+    return int(n)
 
 
 def arrays_to_npz(arrays: Mapping[str, np.ndarray], *, compress: bool = False) -> bytes:
@@ -98,14 +116,22 @@ def arrays_to_npz(arrays: Mapping[str, np.ndarray], *, compress: bool = False) -
     return buf.getvalue()
 
 
+_DAMAGED = (ValueError, OSError, EOFError, KeyError, IndexError, TypeError, OverflowError, MemoryError,
+            NotImplementedError, RuntimeError, SyntaxError, struct.error, zlib.error, zipfile.BadZipFile,
+            tokenize.TokenError)
+"""What ``np.load`` raises on a cut, corrupted or hostile .npz (seen by fuzzing: a bad zip directory or
+CRC, a bad deflate stream, an 'encrypted' or unknown-method member, a garbled .npy header)."""
+
+
 def npz_to_arrays(data: bytes | io.BufferedIOBase, where: str = "npz") -> dict[str, np.ndarray]:
-    """Read every array of an .npz, refusing pickled object arrays."""
+    """Read every array of an .npz, refusing pickled object arrays; ``ValidationError`` if it is damaged."""
     src = io.BytesIO(data) if isinstance(data, bytes) else data
     try:
         with np.load(src, allow_pickle=False) as z:
             return {k: z[k] for k in z.files}
-    except (ValueError, OSError, EOFError) as exc:
-        raise ValidationError(f"{where}: not a readable .npz ({exc})") from None
+    except _DAMAGED as exc:
+        detail = str(exc).splitlines()[0][:200] if str(exc) else type(exc).__name__
+        raise ValidationError(f"{where}: not a readable .npz, damaged or cut short ({detail})") from None
 
 
 META_KEY = "__meta__"
@@ -113,11 +139,12 @@ META_KEY = "__meta__"
 RECORD_SCHEMA = 1
 
 
-def save_record(path: str | os.PathLike, record: Any, *, compress: bool = False) -> Path:
+def save_record(path: str | os.PathLike, record: Any, *, compress: bool = False, fsync: bool = False) -> Path:
     """Write ``record`` to one .npz file atomically (temp file + rename); returns the path.
 
     The file holds every array under its path key and ``__meta__``: JSON ``{"kind": type name,
-    "schema": RECORD_SCHEMA, "record": metadata}``. Readable by any numpy, no pickle.
+    "schema": RECORD_SCHEMA, "record": metadata}``. Readable by any numpy, no pickle. With ``fsync`` the
+    temp file is fsynced before the rename and the folder after it, so the new file survives power loss.
     """
     path = Path(path)
     meta, arrays = flatten(record)
@@ -125,13 +152,28 @@ def save_record(path: str | os.PathLike, record: Any, *, compress: bool = False)
     arrays = dict(arrays)
     arrays[META_KEY] = np.frombuffer(json.dumps(head).encode(), dtype=np.uint8)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
     try:
-        tmp.write_bytes(arrays_to_npz(arrays, compress=compress))
+        with open(tmp, "wb") as fh:
+            fh.write(arrays_to_npz(arrays, compress=compress))
+            if fsync:
+                fh.flush()
+                os.fsync(fh.fileno())
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
+    if fsync:
+        fsync_dir(path.parent)
     return path
+
+
+def fsync_dir(folder: str | os.PathLike) -> None:
+    """Make renames, creations and deletions in ``folder`` durable (POSIX: fsync the directory)."""
+    fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def record_kind(path: str | os.PathLike) -> str:
@@ -145,6 +187,8 @@ def load_record(path: str | os.PathLike, cls: type[T]) -> T:
     head, arrays = _read_record_file(path)
     if head.get("kind") != cls.__name__:
         raise InputError(f"{path}: holds a {head.get('kind')!r} record, expected {cls.__name__}")
+    if "record" not in head:
+        raise InputError(f"{path}: its {META_KEY} entry has no 'record'")
     try:
         return unflatten(cls, head["record"], arrays)
     except ValidationError as exc:
@@ -165,6 +209,9 @@ def _read_record_file(path: Path) -> tuple[dict, dict[str, np.ndarray]]:
         head = json.loads(raw.tobytes().decode())
     except (UnicodeDecodeError, json.JSONDecodeError):
         raise InputError(f"{path}: its {META_KEY} entry is not valid JSON") from None
-    if not isinstance(head, dict) or head.get("schema", 0) > RECORD_SCHEMA:
-        raise InputError(f"{path}: record schema {head.get('schema') if isinstance(head, dict) else '?'} is newer than this Arboretum reads ({RECORD_SCHEMA})")
+    schema = head.get("schema", 0) if isinstance(head, dict) else None
+    if not isinstance(schema, int):
+        raise InputError(f"{path}: its {META_KEY} entry has no valid record schema")
+    if schema > RECORD_SCHEMA:
+        raise InputError(f"{path}: record schema {schema} is newer than this Arboretum reads ({RECORD_SCHEMA})")
     return head, arrays

@@ -232,6 +232,36 @@ class Example:
         object.__setattr__(self, "tags", tuple(sorted({t.lower() for t in self.tags})))
 
 
+MIN_SCALE, MAX_SCALE = 1e-3, 1e3
+"""Range of the uniform scale of a placement or a lobe edit: far beyond any real use, narrow enough that
+every product of the transforms stays finite and well-conditioned in float64."""
+MAX_OFFSET = 1e6
+"""Largest translation, metres, of a placement or a lobe edit along any axis (1,000 km)."""
+
+
+def _check_scale(where: str, s: float) -> None:
+    if not (math.isfinite(s) and MIN_SCALE <= s <= MAX_SCALE):
+        raise ValidationError(f"{where}: must be a number in [{MIN_SCALE:g}, {MAX_SCALE:g}], got {s:.6g}")
+
+
+def _check_offset(where: str, T: np.ndarray) -> None:
+    if np.abs(T[:3, 3]).max() > MAX_OFFSET:
+        raise ValidationError(f"{where}: translation {np.abs(T[:3, 3]).max():.3g} m exceeds {MAX_OFFSET:g} m")
+
+
+def _check_similarity(owner: object, name: str, T: np.ndarray) -> None:
+    """``T``: a rotation with a uniform scale in range, a translation in range, last row (0, 0, 0, 1)."""
+    where = f"{type(owner).__name__}.{name}"
+    R = T[:3, :3]
+    s = float(np.cbrt(np.linalg.det(R))) if np.abs(R).max() <= 2 * MAX_SCALE else math.inf
+    if s > 0 and math.isfinite(s):
+        ok = np.allclose(R @ R.T, s * s * np.eye(3), atol=1e-6 * max(1.0, s * s))
+        if not ok or not np.allclose(T[3], [0, 0, 0, 1]):
+            raise ValidationError(f"{where}: must be a rotation, a positive uniform scale and a translation")
+    _check_scale(f"{where} scale", s)
+    _check_offset(where, T)
+
+
 @dataclass(frozen=True, eq=False)
 class LobeTransform:
     """A per-lobe edit inside a placed example: a 4x4 similarity applied in the example frame."""
@@ -242,12 +272,15 @@ class LobeTransform:
     """(4, 4) float64: rotation, uniform scale and translation applied about the lobe centre."""
 
     def __post_init__(self) -> None:
-        frozen_array(self, "T_example_lobe", self.T_example_lobe, np.float64, (4, 4))
+        T = frozen_array(self, "T_example_lobe", self.T_example_lobe, np.float64, (4, 4))
+        if self.lobe < 0:
+            raise ValidationError(f"LobeTransform.lobe: {self.lobe} is not a lobe index (0 or more)")
+        _check_similarity(self, "T_example_lobe", T)
 
 
 def _check_rigid(owner: object, name: str, T: np.ndarray) -> None:
     R = T[:3, :3]
-    if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or not math.isclose(
+    if np.abs(R).max() > 1.5 or not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or not math.isclose(
         float(np.linalg.det(R)), 1.0, abs_tol=1e-6
     ) or not np.allclose(T[3], [0, 0, 0, 1]):
         raise ValidationError(f"{type(owner).__name__}.{name}: must be a rigid transform (rotation + translation)")
@@ -269,9 +302,9 @@ class Placement:
 
     def __post_init__(self) -> None:
         T = frozen_array(self, "T_world_example", self.T_world_example, np.float64, (4, 4))
+        _check_offset("Placement.T_world_example", T)
         _check_rigid(self, "T_world_example", T)
-        if not (math.isfinite(self.scale) and self.scale > 0):
-            raise ValidationError(f"Placement.scale: must be a finite number > 0, got {self.scale}")
+        _check_scale("Placement.scale", self.scale)
         object.__setattr__(self, "lobe_transforms", tuple(self.lobe_transforms))
 
 

@@ -6,7 +6,10 @@ the caller replies: it appends the edit to ``ID.journal`` (one write per edit, l
 a torn tail is ignored). Every ``SNAPSHOT_EVERY`` edits the journal is renamed ``ID.journal.old`` and a
 background thread writes ``ID.npz`` with ``save_record`` (temp file + rename; the history is immutable,
 so this never races an edit), then deletes the old journal. Loading replays both journals' entries
-newer than the snapshot.
+newer than the snapshot; if it found an ``ID.journal.old`` (a snapshot cut short by a kill) it writes a
+snapshot at once, so later background snapshots go on. If a background snapshot fails (disk full), the
+next one first appends the journal to ``ID.journal.old`` and tries again. With ``fsync`` every journal
+entry, snapshot file and rename or deletion in the folder is fsynced before it is relied on.
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ from pathlib import Path
 import msgpack
 import numpy as np
 
-from arboretum_library.codec import flatten, load_record, save_record, unflatten
+from arboretum_library.codec import flatten, fsync_dir, load_record, save_record, unflatten
 from arboretum_library.errors import InputError
 from arboretum_library.model import Assembly
 
@@ -125,6 +128,11 @@ class Autosave:
             self._since_snapshot += 1
         if self.journal_path.exists() and good < self.journal_path.stat().st_size:
             os.truncate(self.journal_path, good)  # drop a torn tail before appending
+        if self.old_journal_path.exists():  # a snapshot cut short: fold both journals into a new one now
+            try:
+                self.snapshot(history)
+            except OSError as exc:  # the journals still hold every edit; the next snapshot tries again
+                log.error("snapshot %s failed: %s", self.snapshot_path, exc)
         return history
 
     def record(self, history: History, op: str) -> None:
@@ -143,22 +151,43 @@ class Autosave:
             self._snapshot_in_background(history)
 
     def _snapshot_in_background(self, history: History) -> None:
-        if self.old_journal_path.exists():  # a snapshot that never finished: its entries are still needed
+        try:
+            self._retire_journal()
+        except OSError as exc:  # the journals are as they were: nothing lost, try at the next snapshot
+            log.error("snapshot %s postponed: %s", self.snapshot_path, exc)
             return
-        os.replace(self.journal_path, self.old_journal_path)
         snap = Snapshot(history, self.seq)
         self._since_snapshot = 0
 
         def write() -> None:
             try:
-                save_record(self.snapshot_path, snap)
+                self._save(snap)
+                self.old_journal_path.unlink(missing_ok=True)
+                if self.fsync:
+                    fsync_dir(self.snapshot_path.parent)
             except OSError as exc:  # keep the old journal: it still holds these edits
                 log.error("snapshot %s failed: %s", self.snapshot_path, exc)
-                return
-            self.old_journal_path.unlink(missing_ok=True)
 
         self._writer = threading.Thread(target=write, name=f"snapshot {self.snapshot_path.stem}", daemon=True)
         self._writer.start()
+
+    def _save(self, snap: Snapshot) -> None:
+        save_record(self.snapshot_path, snap, **({"fsync": True} if self.fsync else {}))
+
+    def _retire_journal(self) -> None:
+        """Move the journal's entries into ``ID.journal.old`` (renamed, or appended after an earlier
+        snapshot failed) and start an empty journal; every entry stays in one of the two meanwhile."""
+        if not self.old_journal_path.exists():
+            os.replace(self.journal_path, self.old_journal_path)
+        else:
+            entries = self.journal_path.read_bytes()[: _read_journal(self.journal_path)[1]]
+            os.truncate(self.old_journal_path, _read_journal(self.old_journal_path)[1])  # a torn tail
+            with open(self.old_journal_path, "ab") as fh:
+                fh.write(entries)
+                _sync(fh, self.fsync)
+            os.truncate(self.journal_path, 0)
+        if self.fsync:
+            fsync_dir(self.journal_path.parent)
 
     def wait(self) -> None:
         """Wait for a background snapshot to finish."""
@@ -168,10 +197,13 @@ class Autosave:
     def snapshot(self, history: History) -> None:
         """Write the whole history atomically and empty the journals (waits for a background one)."""
         self.wait()
-        save_record(self.snapshot_path, Snapshot(history, self.seq))
+        self._save(Snapshot(history, self.seq))
         if self.journal_path.exists():
-            os.truncate(self.journal_path, 0)
-        self.old_journal_path.unlink(missing_ok=True)
+            os.truncate(self.journal_path, 0)  # its entries are in the snapshot: no fsync needed
+        if self.old_journal_path.exists():
+            self.old_journal_path.unlink()
+            if self.fsync:
+                fsync_dir(self.snapshot_path.parent)
         self._since_snapshot = 0
 
     def delete(self) -> None:
@@ -192,11 +224,18 @@ def unpack_arrays(packed: dict[str, list]) -> dict[str, np.ndarray]:
 def append_entry(path: Path, entry: dict, fsync: bool = False) -> None:
     """Append one length- and CRC-framed msgpack entry to the journal ``path`` in a single write."""
     payload = bytes(msgpack.packb(entry, use_bin_type=True) or b"")
+    new = fsync and not path.exists()
     with open(path, "ab") as fh:
         fh.write(_FRAME.pack(len(payload), zlib.crc32(payload)) + payload)
-        if fsync:
-            fh.flush()
-            os.fsync(fh.fileno())
+        _sync(fh, fsync)
+    if new:  # a new file: its name must be durable too
+        fsync_dir(path.parent)
+
+
+def _sync(fh, fsync: bool) -> None:
+    if fsync:
+        fh.flush()
+        os.fsync(fh.fileno())
 
 
 def read_journal(path: Path) -> tuple[list[dict], int]:

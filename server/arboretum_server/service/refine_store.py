@@ -39,12 +39,12 @@ def _paths(folder: Path, sid: str) -> tuple[Path, Path]:
 
 
 def start(folder: Path, sid: str, points: np.ndarray, labels: np.ndarray | None, name: str, species: str,
-          options: dict) -> RefineSource:
+          options: dict, fsync: bool = False) -> RefineSource:
     """Record a new draft's source (replacing any earlier draft of the session)."""
     src = RefineSource(np.asarray(points, np.float64), np.zeros(0, np.uint8) if labels is None else labels,
                        name, species, dict(options), secrets.token_hex(8))
     source, journal = _paths(folder, sid)
-    save_record(source, src)
+    save_record(source, src, fsync=fsync)
     journal.unlink(missing_ok=True)
     return src
 
@@ -71,3 +71,13 @@ def load(folder: Path, sid: str) -> tuple[RefineSource, list[dict]] | None:
 def delete(folder: Path, sid: str) -> None:
     for p in _paths(folder, sid):
         p.unlink(missing_ok=True)
+
+
+def remove_orphans(folder: Path, live: list[str] | set[str]) -> list[Path]:
+    """Delete the refine files in ``folder`` of sessions not in ``live`` (closed while a job ran, say)."""
+    keep = set(live)
+    gone = [p for suffix in (".refine.npz", ".refine.journal") for p in folder.glob(f"*{suffix}")
+            if p.name[: -len(suffix)] not in keep]
+    for p in gone:
+        p.unlink(missing_ok=True)
+    return gone

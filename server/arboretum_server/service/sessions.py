@@ -5,11 +5,16 @@ session found there is loaded when the server starts, so a server killed with SI
 every edit it had acknowledged. The refinement draft (a ``Decomposition`` with its cached graph) lives in
 memory, and its source scan and edits in ``ID.refine.npz`` + ``ID.refine.journal`` (``refine_store``): after a
 restart, the first refinement request rebuilds it in a worker.
+
+A session whose files cannot be read (a snapshot cut short, garbage) is skipped at start-up with an
+error in the log, and all its files are moved into ``STATE/sessions/damaged/`` (never deleted). Refine
+files whose session is gone (closed while a job ran, say) are deleted at start-up.
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import secrets
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -81,13 +86,28 @@ class Sessions:
         self._memory_dir: Path | None = None
         if self.folder is not None:
             self.folder.mkdir(parents=True, exist_ok=True)
-            names = {p.stem for p in self.folder.glob("*.npz")} | {p.stem for p in self.folder.glob("*.journal")}
-            for sid in sorted(n for n in names if _valid(n)):
-                try:
-                    auto = Autosave(self.folder, sid, fsync)
-                    self._all[sid] = Session(sid, auto.load(), auto)
-                except ArboretumError as exc:
-                    log.error("session %s could not be loaded: %s", sid, exc)
+            for sid in saved_ids(self.folder):
+                self._load(sid)
+            from .refine_store import remove_orphans
+
+            gone = remove_orphans(self.folder, saved_ids(self.folder))
+            if gone:
+                log.warning("removed %d refine file(s) of sessions that no longer exist", len(gone))
+
+    def _load(self, sid: str) -> None:
+        """Load session ``sid`` from the folder; log and skip it (moving a damaged one aside) if it fails."""
+        assert self.folder is not None
+        try:
+            auto = Autosave(self.folder, sid, self.fsync)
+            self._all[sid] = Session(sid, auto.load(), auto)
+        except ArboretumError as exc:
+            try:
+                moved = f"were moved to {move_aside(self.folder, sid)}"
+            except OSError as err:
+                moved = f"could not be moved aside ({err})"
+            log.error("session %s could not be loaded: %s; its files %s", sid, exc, moved)
+        except OSError as exc:
+            log.error("session %s could not be read: %s", sid, exc)
 
     def new(self, name: str = "", history: History | None = None) -> Session:
         sid = secrets.token_hex(8)
@@ -115,6 +135,12 @@ class Sessions:
             raise NotFound(f"no session {sid[:40]!r} on this server")
         return s
 
+    def still_open(self, s: Session) -> Session:
+        """``s`` if it was not closed meanwhile (a job's result arriving late); ``NotFound`` otherwise."""
+        if self._all.get(s.id) is not s:
+            raise NotFound(f"session {s.id[:40]!r} was closed while this request ran")
+        return s
+
     def close(self, sid: str) -> None:
         from .refine_store import delete
 
@@ -133,3 +159,26 @@ class Sessions:
 
 def _valid(sid: str) -> bool:
     return 0 < len(sid) <= 64 and all(c in "0123456789abcdef" for c in sid)
+
+
+SESSION_FILES = (".npz", ".journal", ".journal.old")
+"""Suffixes of a session's autosave files (``assembly.state.Autosave``)."""
+
+
+def saved_ids(folder: Path) -> list[str]:
+    """Ids of the sessions with autosave files in ``folder``."""
+    names = {p.name.split(".", 1)[0] for suffix in SESSION_FILES for p in folder.glob(f"*{suffix}")
+             if p.name.endswith(suffix) and p.name.count(".") == suffix.count(".")}
+    return sorted(n for n in names if _valid(n))
+
+
+def move_aside(folder: Path, sid: str) -> Path:
+    """Move every file of session ``sid`` into ``folder/damaged`` (no name is ever overwritten)."""
+    dest = folder / "damaged"
+    dest.mkdir(exist_ok=True)
+    for p in sorted(folder.glob(f"{sid}.*")):
+        target, n = dest / p.name, 1
+        while target.exists():
+            target, n = dest / f"{p.name}.{n}", n + 1
+        os.replace(p, target)
+    return dest

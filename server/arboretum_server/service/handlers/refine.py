@@ -16,12 +16,15 @@ from arboretum_library import protocol as P
 from arboretum_library.errors import InputError
 from arboretum_server.service import refine_store
 from arboretum_server.service.context import Context
+from arboretum_server.service.handlers.assembly import checked_strokes
 from arboretum_server.service.handlers.library import options_from
 from arboretum_server.service.jobs import Job
 from arboretum_server.service.sessions import RefineDraft, Session
 
 EDITS = ("remove_lobe", "insert_lobe", "merge_lobes", "split_lobe")
 WARM = ("arboretum_server.decompose.refine", "sklearn.cluster", "arboretum_server.decompose.examples")
+MAX_SPLIT_STROKES = 100
+"""Strokes of one split (one new lobe each; k-means with that many centres runs in the server's loop)."""
 
 
 def apply_edit(dec: Any, kind: str, args: dict) -> Any:
@@ -69,6 +72,7 @@ def _with_draft(ctx: Context, session_id: str, then: Callable[[Session, RefineDr
     src, edits = saved
 
     def finish(r: dict) -> P.Reply:
+        ctx.sessions.still_open(s)
         if s.refine is not None:  # another request rebuilt it meanwhile: keep that one
             return then(s, s.refine)
         s.refine = RefineDraft(r["states"], r["index"], src.name, src.species, r["revision"], src.generation)
@@ -84,7 +88,9 @@ def open_scan(ctx: Context, req: P.RefineOpen) -> Job:
     options_from(req.species, req.options)
 
     def finish(r: dict) -> P.RefineState:
-        src = refine_store.start(ctx.sessions.dir(), s.id, req.points, req.labels, req.name, req.species, req.options)
+        ctx.sessions.still_open(s)  # closed while the job ran: write nothing
+        src = refine_store.start(ctx.sessions.dir(), s.id, req.points, req.labels, req.name, req.species,
+                                 req.options, ctx.sessions.fsync)
         s.refine = RefineDraft(r["states"], 0, req.name, req.species, 0, src.generation)
         return _state(s.refine)
 
@@ -125,6 +131,7 @@ def merge_lobes(ctx: Context, req: P.MergeLobes):
 
 
 def split_lobe(ctx: Context, req: P.SplitLobe):
+    checked_strokes(req.stroke_points, req.stroke_sizes, "split lobe", MAX_SPLIT_STROKES)
     return _edit(ctx, req.session, "split_lobe", {"lobe": req.lobe, "seed": req.seed},
                  {"stroke_points": req.stroke_points, "stroke_sizes": req.stroke_sizes})
 
@@ -148,7 +155,7 @@ def commit(ctx: Context, req: P.RefineCommit):
         lib = ctx.library()
         prov = Provenance(d.name, "", dec.options.species, dec.options.as_dict())
         stem = "".join(c if c.isalnum() or c in "-_" else "-" for c in d.name)[:60] or "scan"
-        examples = make_examples(dec.hbl, prov, lambda: lib.new_id(stem), lib.add)
+        examples = lib.add_new(make_examples(dec.hbl, prov, lambda: "new"), stem)  # ids picked under the lock
         return P.LibraryImported(ids=tuple(e.id for e in examples), stats={"lobes": len(dec.lobes)}, notes=said)
 
     return _with_draft(ctx, req.session, then)

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 from arboretum_library import protocol as P
+from arboretum_library.errors import InputError
 from arboretum_library.model import Assembly
 from arboretum_server.assembly.state import History
-from arboretum_server.assembly.world import assembly_to_hbl
+from arboretum_server.assembly.world import assembly_to_hbl, resolver
 from arboretum_server.service.context import Context
 from arboretum_server.service.sessions import Session
 
@@ -41,11 +42,29 @@ def load(ctx: Context, req: P.SessionLoad) -> P.SessionInfo:
 
 
 def _checked(ctx: Context, a: Assembly) -> Assembly:
-    """``a`` if every placement names a sketch or a library example (``StoreError`` otherwise)."""
-    sketches = {e.id for e in a.sketches}
-    for p in a.placements:
-        if p.example_id not in sketches:
-            ctx.example(p.example_id)
+    """``a`` if every placement names a sketch or a library example (``StoreError`` otherwise), every
+    lobe edit an existing lobe, and the merge links a forest (``InputError`` naming the field)."""
+    source = resolver(a, ctx.example)
+    for i, p in enumerate(a.placements):
+        n = len(source(p.example_id).structure.lobes)
+        for j, lt in enumerate(p.lobe_transforms):
+            if lt.lobe >= n:
+                raise InputError(f"session.load: Assembly.placements[{i}].lobe_transforms[{j}].lobe: {lt.lobe} "
+                                 f"does not exist ({p.example_id!r} has {n} lobes)")
+    parent: dict[str, str] = {}
+    for m in a.merges:
+        if m.b in parent:
+            raise InputError(f"session.load: Assembly.merges: {m.b!r} is merged into two placements")
+        parent[m.b] = m.a
+    acyclic: set[str] = set()
+    for start in parent:
+        path, name = {start}, start
+        while name in parent and name not in acyclic:
+            name = parent[name]
+            if name in path:
+                raise InputError(f"session.load: Assembly.merges: the links through {start!r} form a cycle")
+            path.add(name)
+        acyclic |= path
     return a
 
 
