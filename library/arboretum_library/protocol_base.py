@@ -172,8 +172,9 @@ def _pattern(shape: tuple) -> str:
 
 
 # -- encoding ------------------------------------------------------------------------------------
-def to_frames(msg: Msg, request_id: int) -> list[bytes | memoryview]:
-    """The wire frames of ``msg`` answering or making request ``request_id``."""
+def to_frames(msg: Msg, request_id: int, client: str = "") -> list[bytes | memoryview]:
+    """The wire frames of ``msg`` answering or making request ``request_id``; ``client`` is the
+    sender's token (optional header key "client", see ``wire``)."""
     body: dict[str, Any] = {}
     arrays: dict[str, np.ndarray] = {}
     for f in dataclasses.fields(msg):
@@ -188,7 +189,7 @@ def to_frames(msg: Msg, request_id: int) -> list[bytes | memoryview]:
             arrays.update({f"{f.name}/{k}": a for k, a in recs.items()})
         else:
             body[f.name] = list(v) if isinstance(v, tuple) else v
-    return encode(Message(msg.TYPE, request_id, body, arrays))
+    return encode(Message(msg.TYPE, request_id, body, arrays, client))
 
 
 def from_message(m: Message) -> Msg:
@@ -229,6 +230,12 @@ def parse(frames: Sequence[bytes | memoryview], limits: Limits = DEFAULT_LIMITS)
     return m.id, from_message(m)
 
 
+def parse_request(frames: Sequence[bytes | memoryview], limits: Limits = DEFAULT_LIMITS) -> tuple[int, str, Msg]:
+    """(request id, client token or "", typed message) of wire ``frames``; ``ProtocolError`` as ``parse``."""
+    m = decode(frames, limits)
+    return m.id, m.client, from_message(m)
+
+
 class UnknownType(ProtocolError):
     """A message type this side does not know."""
 
@@ -262,6 +269,16 @@ def describe() -> str:
         "`code` and a `message`. LONG requests run as jobs in worker processes; before the reply they send",
         "`progress` events with the same `id`, and `cancel` stops them (they then reply `error`/`cancelled`).",
         "Clients send `hello` first: a version mismatch is an `error` with code `version` naming both versions.", "",
+        "Optional header key `client`: a random token of at most 64 characters, the same for every retry",
+        "of the client (`Remote` makes one per instance). The server keys its reply cache and running jobs",
+        "by (`client`, `id`, `type`), so a request resent with the same `id` on a new socket gets the",
+        "original's progress and reply and is never run twice; without the key, by (socket, `id`, `type`).",
+        "Replies of requests that change nothing (`ping`, `hello`, `cancel`, `library.list`, `library.search`,",
+        "`library.get`, `session.list`, `session.get`, `session.hbl`, `refine.points`, `assembly.recognize`)",
+        "are not kept: a retry runs again. A retry",
+        "whose reply was dropped from the cache is answered `error`/`duplicate`, never run again. Peers",
+        "ignore header keys they do not know, so this needs no new version. REQ sockets work too: the",
+        "server strips their empty delimiter frame and puts it back on the reply.", "",
     ]
     for name, cls in sorted(REGISTRY.items()):
         kind = "request" if issubclass(cls, Request) else "reply" if issubclass(cls, Reply) else "event"

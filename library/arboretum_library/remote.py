@@ -7,8 +7,9 @@
 
 One DEALER socket, used from one thread. Every call has a timeout; on a timeout the socket is closed
 (linger 0) and a new one connects (the "lazy pirate" pattern), and the request is sent again with the
-same id: the server answers a retried request from its reply cache, so an edit is never applied
-twice. LONG requests stream ``Progress`` events; each event restarts the timeout, and a progress
+same id and the same client token (a random header key "client", one per ``Remote``): the server
+keys replies and jobs by (token, id, type), so a retried edit is answered, never applied twice, a
+retried job keeps running and answers the new socket, and two clients never share a reply. LONG requests stream ``Progress`` events; each event restarts the timeout, and a progress
 callback that returns False cancels the job. Failures raise ``RemoteError`` with the server's code.
 """
 
@@ -51,6 +52,8 @@ class Remote:
         self._curve = _client_keys(Path(curve)) if curve is not None else None
         self._zctx = zctx or zmq.Context.instance()
         self._next_id = secrets.randbits(40) << 20
+        self.client = secrets.token_hex(16)
+        """This client's token, sent with every request (and every retry)."""
         self._sock: zmq.Socket | None = None
         self.welcome: P.Welcome | None = None
         if handshake:
@@ -87,7 +90,7 @@ class Remote:
         """Send ``req`` and return its reply (of type ``req.REPLY``); ``RemoteError`` on an error reply."""
         self._next_id += 1
         rid = self._next_id
-        frames = P.to_frames(req, rid)
+        frames = P.to_frames(req, rid, self.client)
         wait = self.timeout if timeout is None else timeout
         for _ in range((self.retries if retries is None else retries) + 1):
             self._socket().send_multipart(frames, copy=False)
@@ -117,7 +120,7 @@ class Remote:
             if isinstance(msg, P.Progress):
                 deadline = time.monotonic() + wait
                 if progress is not None and progress(msg.done, msg.total, msg.message) is False:
-                    sock.send_multipart(P.to_frames(P.Cancel(request=rid), rid + (1 << 62)))
+                    sock.send_multipart(P.to_frames(P.Cancel(request=rid), rid + (1 << 62), self.client))
                 continue
             return msg
         return None

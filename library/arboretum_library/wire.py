@@ -3,8 +3,11 @@
 A message on the wire is a list of ZeroMQ frames::
 
     frame 0   msgpack map {"v": PROTOCOL_VERSION, "id": request id, "type": message type,
-                           "body": JSON-like map, "arrays": [[name, dtype, shape], ...]}
+                           "body": JSON-like map, "arrays": [[name, dtype, shape], ...],
+                           optional "client": a client's random token, the same in all its retries}
     frame 1.. the raw bytes of each array, in the order of "arrays", C order
+
+Unknown header keys are ignored, so an optional key such as "client" needs no new protocol version.
 
 dtypes carry their byte order ("<f4") and must be in ``DTYPES``; shapes are checked against the frame
 size; array and message sizes are limited (``Limits``). ``decode`` turns anything malformed into one
@@ -13,6 +16,7 @@ size; array and message sizes are limited (``Limits``). ``decode`` turns anythin
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -50,6 +54,13 @@ class Message:
     id: int = 0
     body: Mapping[str, Any] = field(default_factory=dict)
     arrays: Mapping[str, np.ndarray] = field(default_factory=dict)
+    client: str = ""
+    """The sender's client token ("" if none): a server keys replies and jobs by it, so a client can
+    retry on a new socket; without one, by the socket."""
+
+
+MAX_CLIENT_TOKEN = 64
+"""Characters a "client" token may have at most."""
 
 
 def encode(msg: Message) -> list[bytes | memoryview]:
@@ -64,6 +75,8 @@ def encode(msg: Message) -> list[bytes | memoryview]:
         specs.append([name, a.dtype.str, list(a.shape)])
         frames.append(memoryview(a).cast("B") if a.size else b"")
     header = {"v": PROTOCOL_VERSION, "id": msg.id, "type": msg.type, "body": dict(msg.body), "arrays": specs}
+    if msg.client:
+        header["client"] = msg.client
     return [msgpack.packb(header, use_bin_type=True), *frames]
 
 
@@ -85,19 +98,28 @@ def decode(frames: Sequence[bytes | memoryview], limits: Limits = DEFAULT_LIMITS
         if name in arrays:
             raise ProtocolError(f"array {name!r} appears twice")
         arrays[name] = arr
-    return Message(header["type"], header["id"], header["body"], arrays)
+    return Message(header["type"], header["id"], header["body"], arrays, header.get("client", ""))
 
 
 def _header(frame: bytes | memoryview, limits: Limits) -> dict:
     if len(frame) > limits.max_header_bytes:
         raise ProtocolError(f"header frame is larger than {limits.max_header_bytes} bytes")
+    if not len(frame):
+        raise ProtocolError("header frame is empty (a REQ socket's empty delimiter frame where a header belongs?)")
     try:
         h = msgpack.unpackb(bytes(frame), raw=False, strict_map_key=True, max_bin_len=0, max_ext_len=0)
+    except ValueError as exc:
+        if "max_bin_len" in str(exc) or "max_ext_len" in str(exc):
+            raise ProtocolError("header holds binary data; bytes travel as array frames (dtype |u1), "
+                                "the header takes only maps, lists, strings, numbers, booleans and nil") from None
+        raise ProtocolError(f"header frame is not valid msgpack ({exc or type(exc).__name__})") from None
     except Exception as exc:  # msgpack raises many types on garbage
         raise ProtocolError(f"header frame is not valid msgpack ({type(exc).__name__})") from None
     if not isinstance(h, dict):
         raise ProtocolError("header frame must be a map")
     version = h.get("v")
+    if not isinstance(version, int) or isinstance(version, bool):
+        raise ProtocolError(f"header 'v' (the protocol version) must be an integer, got {type(version).__name__}")
     if version != PROTOCOL_VERSION:
         raise ProtocolError(f"protocol version {version!r} is not supported; this side speaks {PROTOCOL_VERSION}")
     if not isinstance(h.get("type"), str) or not h["type"]:
@@ -109,6 +131,9 @@ def _header(frame: bytes | memoryview, limits: Limits) -> dict:
     specs = h.get("arrays", [])
     if not isinstance(specs, list) or len(specs) > limits.max_arrays:
         raise ProtocolError(f"header 'arrays' must be a list of at most {limits.max_arrays} specs")
+    client = h.get("client", "")
+    if not isinstance(client, str) or len(client) > MAX_CLIENT_TOKEN:
+        raise ProtocolError(f"header 'client' must be a string of at most {MAX_CLIENT_TOKEN} characters")
     h.setdefault("id", 0)
     h.setdefault("body", {})
     h["arrays"] = specs
@@ -128,6 +153,8 @@ def _array(spec: Any, frame: bytes | memoryview, limits: Limits) -> tuple[str, n
     ):
         raise ProtocolError(f"array {name!r}: shape must be a list of at most {limits.max_ndim} sizes >= 0")
     itemsize = np.dtype(dtype).itemsize
+    if math.prod(s for s in shape if s) * itemsize > limits.max_array_bytes:  # also for empty arrays
+        raise ProtocolError(f"array {name!r}: shape {shape} is over the limit of {limits.max_array_bytes} bytes")
     nbytes = int(np.prod(shape, dtype=np.float64)) * itemsize
     if nbytes > limits.max_array_bytes:
         raise ProtocolError(f"array {name!r}: {nbytes} bytes is over the limit of {limits.max_array_bytes}")

@@ -149,13 +149,21 @@ class JobRunner:
         return True
 
     def rekey(self, old: Hashable, new: Hashable) -> bool:
-        """Deliver job ``old``'s events under ``new`` (a client that reconnected and retried)."""
+        """Deliver job ``old``'s events under ``new``, whether it runs or still waits in the queue."""
         if old in self._running:
             r = self._running.pop(old)
             r.key = new
             self._running[new] = r
             return True
+        for i, (k, job) in enumerate(self._queue):
+            if k == old:
+                self._queue[i] = (new, job)
+                return True
         return False
+
+    def waiting(self) -> list[Hashable]:
+        """Keys of the queued jobs, first to start first."""
+        return [k for k, _ in self._queue]
 
     def keys(self) -> list[Hashable]:
         return list(self._running) + [k for k, _ in self._queue]
