@@ -18,6 +18,7 @@ import numpy as np
 
 from arboretum_library.cli import add_json_flag, emit
 from arboretum_library.errors import InputError
+from arboretum_library.outputs import check_output
 
 VIEW_CHOICES = ("front", "side", "top", "iso")
 
@@ -25,7 +26,7 @@ VIEW_CHOICES = ("front", "side", "top", "iso")
 def register(subparsers) -> None:
     p = subparsers.add_parser("render", help="render point clouds, HBL records, meshes and GLBs to a PNG (headless)")
     p.add_argument("inputs", nargs="+", metavar="INPUT", help="point cloud, HBL/Example .npz, mesh .ply/.obj, or .glb")
-    p.add_argument("--out", required=True, help="PNG file to write")
+    p.add_argument("--out", required=True, help="PNG file to write (.png, in an existing folder)")
     p.add_argument("--view", choices=VIEW_CHOICES, default="iso", help="camera direction (default iso)")
     p.add_argument("--size", default="1280x720", help="image size WIDTHxHEIGHT (default 1280x720)")
     p.add_argument("--points", action="store_true", help="also draw an HBL's source points by label")
@@ -52,6 +53,9 @@ def run(args: argparse.Namespace) -> int:
     from .scene_build import HBLStyle, combine
 
     size = parse_size(args.size)
+    for path in args.inputs:
+        check_input(Path(path))
+    check_output(args.out, "--out", inputs=args.inputs, suffixes=(".png",))
     t0 = time.perf_counter()
     style = HBLStyle(show_points=args.points, grid=False)
     textures = not getattr(args, "no_textures", False)
@@ -73,8 +77,7 @@ def load_scene(path: Path, style, textures: bool = True):
     textured unless ``textures`` is False."""
     from .scene_build import glb_scene, hbl_scene, mesh_scene, points_scene
 
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
+    check_input(path)
     ext = path.suffix.lower()
     if ext == ".glb":
         from arboretum_library.export.gltf_read import read_glb
@@ -92,6 +95,14 @@ def load_scene(path: Path, style, textures: bool = True):
             return mesh_scene(verts, faces, grid=False)
     points, colors = read_point_cloud(path)
     return points_scene(points, colors, grid=False)
+
+
+def check_input(path: Path) -> None:
+    """``InputError`` unless ``path`` names an existing file."""
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder, not a file; give the files in it")
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
 
 
 def load_hbl(path: Path):

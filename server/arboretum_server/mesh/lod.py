@@ -10,6 +10,15 @@ from arboretum_server.grow.skeleton import Leaves
 
 from .chains import Chains
 
+MAX_LEVEL = 16
+"""Coarsest level of detail the commands accept. Each level past 6 changes a grown scan's mesh by under
+1 % and past 10 not at all (3 tube sides, chains down to their ends, one leaf cluster per lobe); the
+chain stride 2^(level-1) would overflow int64 from level 64 (``thin_chains`` now clamps it)."""
+SIDES_RANGE = (3, 64)
+"""Tube sides at LOD 0 the commands accept: a triangle is the least tube; 64 is eight times the default
+and three times the finest we use (20 in the bench), far below the memory a sweep of that many sides
+needs on a big tree (the sweep holds nodes × (sides + 1) × 3 float64 several times)."""
+
 
 @dataclass(frozen=True)
 class LodOptions:
@@ -34,6 +43,7 @@ def thin_chains(chains: Chains, stride: int) -> Chains:
     """Drop inner chain vertices so every ``stride``-th one remains (ends always kept)."""
     if stride <= 1:
         return chains
+    stride = min(stride, max(len(chains.nodes), 1))  # larger strides keep the same ends (and overflow int64)
     pos = np.arange(len(chains.nodes)) - chains.starts[chains.chain]
     last = chains.starts[chains.chain + 1] - 1
     keep = (pos % stride == 0) | (np.arange(len(chains.nodes)) == last)

@@ -12,6 +12,9 @@ from pathlib import Path
 
 from arboretum_library.cli import add_json_flag, emit
 from arboretum_library.errors import InputError
+from arboretum_library.outputs import check_output
+
+CROWN_FORMATS = (".obj", ".ply", ".glb", ".gltf")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -35,7 +38,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="glTF: one plain node per instance instead of EXT_mesh_gpu_instancing")
     p.add_argument("--types", type=int, default=None, metavar="K",
                    help="module types: clusters for --tree (default 16); first K branch modules otherwise")
-    p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same file)")
+    p.add_argument("--seed", type=int, default=0, help="random seed, >= 0 (same seed, same file)")
     add_json_flag(p)
     p.set_defaults(func=run)
 
@@ -47,9 +50,10 @@ def _crown_mesh(path: str):
 
     p = Path(path)
     if p.suffix.lower() != ".ply":
-        return load_mesh(p)
-    if not p.is_file():
-        raise InputError(f"--crown {p}: file not found")
+        try:
+            return load_mesh(p)
+        except InputError as exc:  # load_mesh names its input "module mesh"
+            raise InputError(str(exc).replace("module mesh", "--crown", 1)) from None
     import trimesh
 
     try:
@@ -62,13 +66,11 @@ def _crown_mesh(path: str):
 def run(args: argparse.Namespace) -> int:
     import time
 
-    from .export import check_format, flat_size, write_instances
+    from .export import flat_size, write_instances
     from .report import describe, size_report
 
     out = Path(args.out)
-    suffix = check_format(out, args.plain_nodes)
-    if args.types is not None and args.types < 1:
-        raise InputError("--types must be >= 1")
+    suffix = _check_args(args)
     t0 = time.perf_counter()
     if args.tree:
         inst, extra = _converted(args)
@@ -81,6 +83,29 @@ def run(args: argparse.Namespace) -> int:
             "timing_s": {"build": t1 - t0, "write": time.perf_counter() - t1}}
     emit(args, data, describe(data))
     return 0
+
+
+def _check_args(args: argparse.Namespace) -> str:
+    """The input, the output path and the numbers, checked before any work; the output's suffix."""
+    from arboretum_server.grow.cli import check_seed
+
+    from .export import check_format
+
+    flag, source = next((f, v) for f, v in (("--crown", args.crown), ("--assembly", args.assembly),
+                                            ("--tree", args.tree)) if v)
+    src = Path(source)
+    if flag == "--crown" and src.suffix.lower() not in CROWN_FORMATS:
+        raise InputError(f"--crown {src}: unsupported format {src.suffix!r} (use {', '.join(CROWN_FORMATS)})")
+    if src.is_dir():
+        raise InputError(f"{flag} {src}: is a folder, not a file")
+    if not src.is_file():
+        raise InputError(f"{flag} {src}: file not found")
+    check_output(args.out, "--out", inputs=[source])
+    suffix = check_format(args.out, args.plain_nodes)
+    if args.types is not None and args.types < 1:
+        raise InputError("--types must be >= 1")
+    check_seed(args.seed)
+    return suffix
 
 
 def _converted(args: argparse.Namespace):

@@ -15,8 +15,13 @@ from pathlib import Path
 
 from arboretum_library.cli import add_json_flag, emit
 from arboretum_library.errors import InputError
+from arboretum_library.outputs import check_output
 
 MODELS = ("guiding", "harmonic")
+MESH_FORMATS = (".glb", ".obj", ".ply")
+MAX_NOISE = 1.0
+"""Largest --noise (range noise sigma, metres): over 300 times the default 3 mm of a terrestrial
+scanner; larger values blur a tree past recognition."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -32,15 +37,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--species", default="default", help="species or preset name (see docs/synthetic.md)"
     )
     p.add_argument(
-        "--seed", type=int, default=0, help="random seed: the same seed gives the same tree"
+        "--seed", type=int, default=0, help="random seed, >= 0: the same seed gives the same tree"
     )
     p.add_argument(
-        "--points", type=int, default=12_000, help="point budget of the scan (default 12000)"
+        "--points", type=int, default=12_000, help="point budget of the scan, >= 200 (default 12000)"
     )
     p.add_argument("--out", type=Path, required=True, help="scan to write (.ply, .xyz or .npy)")
     p.add_argument("--truth", type=Path, help="ground truth to write (.npz)")
     p.add_argument("--mesh", type=Path, help="the true tree as a mesh: .glb (textured), .obj or .ply")
-    p.add_argument("--lod", type=int, default=0, help="level of detail of --mesh: 0 full, 1, 2, ... coarser")
+    p.add_argument("--lod", type=int, default=0, help="level of detail of --mesh: 0 full, 1, 2, ... 16 coarsest")
     p.add_argument("--leaf-off", action="store_true", help="scan without leaves")
     p.add_argument("--missing-sector", type=float, default=0.0, metavar="DEG",
                    help="drop the points in an azimuth wedge this many degrees wide")  # fmt: skip
@@ -48,7 +53,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--scanners", type=int, default=4, help="scanner stations around the tree (default 4)"
     )
     p.add_argument(
-        "--noise", type=float, default=0.003, help="range noise sigma in metres (default 0.003)"
+        "--noise", type=float, default=0.003, help="range noise sigma in metres, 0 to 1 (default 0.003)"
     )
     p.add_argument("--nodes", type=int, help="guiding model: graph node count (default per preset)")
     add_json_flag(p)
@@ -56,25 +61,50 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _check(args: argparse.Namespace) -> None:
-    if args.points < 1:
-        raise InputError(f"--points: must be >= 1, got {args.points}")
+    """Every argument checked before any work: numbers first, then the output paths."""
+    from arboretum_library.pointio import WRITERS
+    from arboretum_server.grow.cli import check_lod, check_number, check_seed
+
+    min_points = min_scan_points()
+    if args.points < min_points:
+        raise InputError(f"--points: must be >= {min_points} (the fewest 'arboretum decompose' takes), "
+                         f"got {args.points}")
     if args.scanners < 1:
         raise InputError(f"--scanners: must be >= 1, got {args.scanners}")
     if not 0 <= args.missing_sector < 360:
         raise InputError(
             f"--missing-sector: must be in [0, 360) degrees, got {args.missing_sector}"
         )
-    if args.noise < 0:
-        raise InputError(f"--noise: must be >= 0, got {args.noise}")
+    check_number(args.noise, "--noise", 0.0, MAX_NOISE)
     if args.nodes is not None and args.nodes < 500:
         raise InputError(f"--nodes: must be >= 500, got {args.nodes}")
-    if args.mesh is not None and args.mesh.suffix.lower() not in (".glb", ".obj", ".ply"):
+    check_seed(args.seed)
+    check_lod(args.lod)
+    if args.mesh is not None and args.mesh.suffix.lower() not in MESH_FORMATS:
         raise InputError(f"--mesh {args.mesh}: write .glb, .obj or .ply")
-    for flag, path in (("--out", args.out), ("--truth", args.truth), ("--mesh", args.mesh)):
-        if path is not None and not path.parent.resolve().is_dir():
-            raise InputError(f"{flag} {path}: folder '{path.parent}' does not exist")
     if args.truth is not None and args.truth.suffix.lower() != ".npz":
         raise InputError(f"--truth {args.truth}: the ground truth is written as .npz")
+    check_output(args.out, "--out", suffixes=tuple(WRITERS))
+    if args.truth is not None:
+        check_output(args.truth, "--truth", outputs=[args.out], suffixes=(".npz",))
+    if args.mesh is not None:
+        check_output(args.mesh, "--mesh", outputs=[args.out, args.truth], suffixes=MESH_FORMATS)
+
+
+def min_scan_points() -> int:
+    """The fewest points a scan may hold: what ``arboretum decompose`` takes (``min_points``)."""
+    from arboretum_server.decompose.options import DecomposeOptions
+
+    return DecomposeOptions().min_points
+
+
+def _check_kept(args: argparse.Namespace, kept: int) -> None:
+    """``InputError`` when occlusion, --leaf-off or --missing-sector left too few points to decompose."""
+    if kept < min_scan_points():
+        why = ["occlusion"] + (["--leaf-off"] if args.leaf_off else []) + (
+            [f"--missing-sector {args.missing_sector:g}"] if args.missing_sector else [])
+        raise InputError(f"--points {args.points}: the scan kept only {kept} points ({', '.join(why)}); "
+                         f"'arboretum decompose' needs {min_scan_points()}: ask for more --points")
 
 
 def grow(model: str, species: str, seed: int, nodes: int | None = None, progress=None):
@@ -116,6 +146,7 @@ def run(args: argparse.Namespace) -> int:
     opts = ScanOptions(points=args.points, scanners=args.scanners, noise=args.noise,
                        leaf_off=args.leaf_off, missing_sector=args.missing_sector)  # fmt: skip
     cloud = scan(truth, opts, np.random.default_rng([args.seed, 1]))
+    _check_kept(args, len(cloud.points))
     t2 = time.perf_counter()
     write_points(args.out, cloud.points, labels=cloud.labels, branch_ids=cloud.branch_ids)
     if args.truth is not None:
