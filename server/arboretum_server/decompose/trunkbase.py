@@ -27,6 +27,10 @@ STANDING = 0.01
 lowest cluster's, and that holds fewer points per metre of height than ``HANGING_SHARE`` of the largest
 cluster's, hangs from the crown (a weeping branch's tips or leaves reaching into the band): it is no
 second tree."""
+LINK = 0.02
+"""Points of the base band closer than this fraction of the height belong to one cluster."""
+LINK_MAX = 4000
+"""A base band of more points is clustered on this many of them (``_link``)."""
 HANGING_SHARE = 0.5
 """See ``STANDING``. Points are counted per metre between a cluster's lowest point and the band's top, so
 a second trunk up a slope, whose lower part the band cuts off, still counts as a tree (and a stray point
@@ -71,13 +75,7 @@ def _base_clusters(base: np.ndarray, h: float, cloud: np.ndarray) -> tuple[np.nd
     not hang from the crown (``STANDING``; ``_no_column`` for all but the lowest; ``cloud`` (N, 3): the
     whole cloud), largest first. InputError when two of those lie more than 10 % of the height apart (several
     trees). ``base`` and ``cloud`` hold x, y and the height above the ground."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
-
-    pairs = cKDTree(base).query_pairs(0.02 * h, output_type="ndarray")
-    adj = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(base),) * 2)
-    _, lab = connected_components(adj, directed=False)
+    lab = _link(base, LINK * h)
     sizes = np.bincount(lab)
     big = np.flatnonzero(sizes >= max(10, 0.1 * len(base)))
     big = big[np.argsort(-sizes[big])]
@@ -89,8 +87,13 @@ def _base_clusters(base: np.ndarray, h: float, cloud: np.ndarray) -> tuple[np.nd
         dense = sizes[big] / np.maximum(base[:, 2].max() - low, 1e-9 * h)
         hanging = (low > low.min() + STANDING * h) & (dense < HANGING_SHARE * dense[0])
         column = _no_column(cloud, [base[lab == c] for c in big], h)
-        column[np.argmin(low)] = False  # the lowest never hangs this way (an occluded trunk beside a bush
-        hanging |= column  # is gappy and wide; weeping leaves may outnumber a thin trunk in the band)
+        # the lowest never hangs this way (an occluded trunk beside a bush is gappy and wide; weeping
+        # leaves may outnumber a thin trunk in the band), unless a larger cluster with a trunk column
+        # stands as low (within STANDING): leaves touching down beside the trunk, a hair lower
+        lowest = int(np.argmin(low))
+        if not ((low <= low[lowest] + STANDING * h) & ~column & (sizes[big] > sizes[big[lowest]])).any():
+            column[lowest] = False
+        hanging |= column
         big = big[~hanging]
     if len(big) >= 2:
         cents = np.array([np.median(base[lab == c], axis=0) for c in big])
@@ -107,6 +110,32 @@ def _base_clusters(base: np.ndarray, h: float, cloud: np.ndarray) -> tuple[np.nd
                 "decompose one tree at a time"
             )
     return lab, big
+
+
+def _link(base: np.ndarray, r: float) -> np.ndarray:
+    """(M,) labels of the connected components of ``base`` (M, 3) with links shorter than ``r``.
+
+    The pairs of a dense band grow with the square of its points (a million-point cloud decomposed
+    with ``--points 0`` took 9 GB here, deaf to Ctrl-C), so a band of more than ``LINK_MAX`` points
+    is clustered on ``LINK_MAX`` of them drawn with a fixed seed, and every other point takes the
+    label of its nearest drawn point within ``r`` (a label of its own beyond)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    drawn = np.arange(len(base))
+    if len(base) > LINK_MAX:
+        drawn = np.sort(np.random.default_rng(0).choice(len(base), LINK_MAX, replace=False))
+    pairs = cKDTree(base[drawn]).query_pairs(r, output_type="ndarray")
+    adj = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(drawn),) * 2)
+    n, lab = connected_components(adj, directed=False)
+    if len(drawn) == len(base):
+        return lab
+    d, j = cKDTree(base[drawn]).query(base, distance_upper_bound=r)
+    far = ~np.isfinite(d)
+    out = np.where(far, 0, lab[np.minimum(j, len(drawn) - 1)])
+    out[far] = n + np.arange(far.sum())
+    return out
 
 
 def _trunks_under_fallen_crown(base: np.ndarray, lab: np.ndarray, big: np.ndarray, cloud: np.ndarray,
