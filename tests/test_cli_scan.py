@@ -119,9 +119,3 @@ def test_convert_bad_arguments(tmp_path, scans, capsys):
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and "target height must be a number > 0" in err[0]
     assert not list(tmp_path.iterdir())
-
-
-def test_scan_without_subcommand_prints_help(capsys):
-    assert main(["scan"]) == 1
-    out = capsys.readouterr().out
-    assert "info" in out and "convert" in out

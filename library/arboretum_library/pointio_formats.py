@@ -146,9 +146,53 @@ def read_text(path: Path) -> Raw:
             else "no points"
         )
         raise fail(path, f"holds {what}")
+    reason = not_points_reason(names)
+    if reason:
+        raise fail(path, reason)
     table = parse_table(path, lines[start:], start + 1)
     rgb_at = 4 if path.suffix.lower() == ".pts" and table.shape[1] == 7 else 3
     return from_table(path, table, names, rgb_at)
+
+
+CYLINDER_COLUMNS = ("start_x", "axis_x", "length", "radius")
+"""Header columns of a cylinder model (TreeQSM's exported ``QSM.cylinder``), not of a point cloud."""
+TEXT_SUFFIXES = (".xyz", ".txt", ".csv", ".asc", ".pts")
+"""Suffixes read by ``read_text``."""
+
+
+def not_points_reason(names: list[str] | None) -> str | None:
+    """Why a text table with header ``names`` is recognisably not a point cloud (a cylinder table:
+    start or axis columns and a radius, without x, y, z), else None."""
+    if not names or all(k in names for k in "xyz"):
+        return None
+    if "radius" in names and ("start_x" in names or "axis_x" in names):
+        return (f"is a cylinder table ({', '.join(CYLINDER_COLUMNS)}: e.g. a TreeQSM model), "
+                "not a point cloud")
+    return None
+
+
+def sniff_not_points(path: Path, limit: int = 65536) -> str | None:
+    """Why a text file is recognisably not a point cloud (``not_points_reason`` of its header, or prose
+    without numbers), from its first ``limit`` bytes only: cheap enough to sort the files of a folder.
+    None for other formats, for files that cannot be read and for anything else (``read_text`` judges)."""
+    if path.suffix.lower() not in TEXT_SUFFIXES:
+        return None
+    try:
+        with open(path, "rb") as f:
+            lines = f.read(limit).removeprefix(b"\xef\xbb\xbf").splitlines()
+    except OSError:
+        return None
+    names = None
+    for line in lines[:MAX_HEADER_LINES]:
+        s = line.strip()
+        if not s or s.startswith(b"#"):
+            continue
+        if all(_is_number(t) for t in re.split(rb"[,;\s]+", s) if t):
+            return not_points_reason(names)
+        names = _header_names(s)
+    if len(lines) > MAX_HEADER_LINES:  # read_text refuses it too
+        return f"holds text without numbers in its first {MAX_HEADER_LINES} lines (e.g. a licence), not a point cloud"
+    return None
 
 
 def parse_table(path: Path, lines: list[bytes], first_line: int) -> np.ndarray:
@@ -158,6 +202,8 @@ def parse_table(path: Path, lines: list[bytes], first_line: int) -> np.ndarray:
     by line to say what is wrong where. Rows with NaN or infinite values are refused with their line.
     """
     body = b"\n".join(lines)
+    if b"," in body:
+        _refuse_decimal_commas(path, lines, first_line)
     delimiter = "," if b"," in body else ";" if b";" in body else None
     try:
         with warnings.catch_warnings():  # "input contained no data": said below, as an InputError
@@ -175,6 +221,31 @@ def parse_table(path: Path, lines: list[bytes], first_line: int) -> np.ndarray:
             f"{int(bad.sum())} point(s) have NaN or infinite values (first on line {numbers[int(np.argmax(bad))]})",
         )
     return table
+
+
+DECIMAL_COMMA = re.compile(rb"[-+]?\d*,\d+(?:[eE][-+]?\d+)?")
+"""A number written with a decimal comma, e.g. ``-1,234`` or ``5,6e-3``."""
+ROWS_CHECKED = 20
+"""Data rows ``_refuse_decimal_commas`` looks at."""
+
+
+def _refuse_decimal_commas(path: Path, lines: list[bytes], first_line: int) -> None:
+    """InputError when a row's values are separated by spaces, tabs or semicolons and written with
+    decimal commas (``1,25 3,5 7,0`` or ``1,25;3,5;7,0``): read as comma-separated columns they would
+    become twice as many whole numbers. Comma-separated rows (``1.25,3.5,7.0``, ``1, 2, 3``) pass."""
+    seen = 0
+    for i, line in enumerate(lines):
+        tokens = [t for t in re.split(rb"[;\s]+", line.split(b"#", 1)[0]) if t]
+        if not tokens:
+            continue
+        commas = [t for t in tokens if DECIMAL_COMMA.fullmatch(t)]
+        if len(tokens) >= 3 and commas and all(b"," not in t or t in commas for t in tokens):
+            example = commas[0].decode("utf-8", "replace")
+            raise fail(path, f"line {first_line + i}: '{example}' looks like a number with a decimal comma; "
+                             "decimal commas? convert them to points (e.g. sed 's/,/./g') and read it again")
+        seen += 1
+        if seen >= ROWS_CHECKED:
+            return
 
 
 def _rows(body: bytes) -> list[bytes]:

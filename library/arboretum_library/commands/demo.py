@@ -25,11 +25,13 @@ from typing import Any
 
 from arboretum_library.assets import asset_path
 from arboretum_library.cli import add_json_flag, emit
-from arboretum_library.errors import ArboretumError
+from arboretum_library.errors import ArboretumError, InputError
 
 SCRIPTS = ("assembly.yaml", "grow.yaml", "library_shot.json", "assembly_shot.json")
 """Files of ``assets/demo/`` copied into OUT before the stages run."""
 PICTURE = ("--size", "960x540", "--json")
+MARKER = ".arboretum-demo"
+"""Written into OUT as a demo starts: tells a later run that the folder is a demo's own output."""
 
 
 @dataclass(frozen=True)
@@ -154,7 +156,7 @@ def copy_scripts(out: Path) -> None:
 
 def files_of(out: Path) -> dict[str, int]:
     """Bytes of every file directly in ``out`` (the library folder counted as one entry)."""
-    sizes = {p.name: p.stat().st_size for p in sorted(out.iterdir()) if p.is_file()}
+    sizes = {p.name: p.stat().st_size for p in sorted(out.iterdir()) if p.is_file() and p.name != MARKER}
     lib = out / "library"
     if lib.is_dir():
         sizes["library/"] = sum(p.stat().st_size for p in lib.rglob("*") if p.is_file())
@@ -181,9 +183,42 @@ def summary_text(summary: dict) -> str:
     return "\n".join(lines)
 
 
-def run(args: argparse.Namespace) -> int:
-    out = Path(args.out).resolve()
+def is_demo_output(out: Path) -> bool:
+    """Whether the folder ``out`` was written by a demo (its marker, or the ``demo.json`` of a demo
+    finished before the marker existed)."""
+    if (out / MARKER).is_file():
+        return True
+    try:
+        return "stages" in json.loads((out / "demo.json").read_text())
+    except (OSError, ValueError, TypeError):
+        return False
+
+
+def prepare_out(out: Path) -> bool:
+    """Make ``out`` ready for a demo: a new or empty folder, or a previous demo's, whose library is
+    removed (a re-run would add every example again). Returns whether a previous demo is replaced.
+    ``InputError`` for a file, or a folder holding anything else (the demo would overwrite it)."""
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out}: is a file, not a folder")
+    replaced = out.is_dir() and any(out.iterdir())
+    if replaced and not is_demo_output(out):
+        names = sorted(p.name for p in out.iterdir())
+        shown = ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
+        raise InputError(f"--out {out}: the folder holds files that are not a demo's ({shown}) and the demo "
+                         "would overwrite them; give a new or empty folder")
     out.mkdir(parents=True, exist_ok=True)
+    (out / MARKER).write_text("written by 'arboretum demo'; a new demo run replaces this folder's demo files\n")
+    if replaced and (out / "library").exists():
+        shutil.rmtree(out / "library")
+    return replaced
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.seed < 0:
+        raise InputError(f"--seed must not be negative, got {args.seed}")
+    out = Path(args.out).resolve()
+    if prepare_out(out):
+        print(f"{out} holds a previous demo: replacing it (its library included)", file=sys.stderr, flush=True)
     copy_scripts(out)
     plan = stages(args.seed)
     t0, c0 = time.perf_counter(), _child_cpu()

@@ -14,15 +14,9 @@ from arboretum_library.cli import add_json_flag, emit
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("scan", help="inspect and convert point cloud files (scans)")
-    sub = parser.add_subparsers(dest="scan_command", metavar="SUBCOMMAND")
-    parser.set_defaults(func=lambda args: _usage(parser))
+    sub = parser.add_subparsers(dest="scan_command", metavar="SUBCOMMAND", required=True)
     _add_info(sub)
     _add_convert(sub)
-
-
-def _usage(parser: argparse.ArgumentParser) -> int:
-    parser.print_help()
-    return 1
 
 
 def _add_up(parser: argparse.ArgumentParser) -> None:
@@ -60,7 +54,8 @@ def _add_convert(sub: argparse._SubParsersAction) -> None:
     _add_up(p)
     p.add_argument("--recentre", action="store_true", help="move the trunk base to the origin")
     p.add_argument(
-        "--height", type=float, default=None, metavar="M", help="scale uniformly to this height (m)"
+        "--height", type=float, default=None, metavar="M",
+        help=f"scale uniformly to this height (m, {MIN_HEIGHT:g} .. {MAX_HEIGHT:g})",
     )
     p.add_argument(
         "--max-points", type=int, default=None, metavar="N", help="thin evenly to at most N points"
@@ -108,9 +103,38 @@ def format_stats(s: dict) -> str:
     return "\n".join(lines)
 
 
+MIN_HEIGHT, MAX_HEIGHT = 1e-3, 1e3
+"""Range of ``scan convert --height`` in metres: a millimetre to a kilometre covers every tree (and
+keeps the scaled coordinates far from float64 overflow)."""
+
+
+def check_convert(args: argparse.Namespace) -> None:
+    """InputError naming the option for a bad ``scan convert`` argument, before the scan is read."""
+    import math
+    from pathlib import Path
+
+    from arboretum_library.errors import InputError
+    from arboretum_library.outputs import check_output
+    from arboretum_library.pointio import WRITERS
+
+    h = args.height
+    if h is not None and not (math.isfinite(h) and MIN_HEIGHT <= h <= MAX_HEIGHT):
+        raise InputError(f"--height {h:g}: the target height must be a number > 0, from {MIN_HEIGHT:g} "
+                         f"to {MAX_HEIGHT:g} metres")
+    if args.max_points is not None and args.max_points < 2:
+        raise InputError(f"--max-points must be at least 2, got {args.max_points}")
+    if args.seed < 0:
+        raise InputError(f"--seed must not be negative, got {args.seed}")
+    suffix = Path(args.output).suffix
+    if suffix.lower() not in WRITERS:
+        raise InputError(f"OUT '{args.output}': cannot write format '{suffix}' (writable: {' '.join(sorted(WRITERS))})")
+    check_output(args.output, "OUT", inputs=[args.input])
+
+
 def run_convert(args: argparse.Namespace) -> int:
     from arboretum_library.pointio import ReadOptions, read_points, scan_stats, write_points
 
+    check_convert(args)
     options = ReadOptions(
         up=args.up,
         recentre=args.recentre,

@@ -44,9 +44,14 @@ def read_script(path: str | Path) -> tuple[str, list[dict]]:
     from arboretum_library.errors import InputError
 
     p = Path(path)
+    if p.is_dir():
+        raise InputError(f"{p}: is a folder, not a script")
     if not p.is_file():
         raise InputError(f"{p}: no such script")
-    text = p.read_text()
+    try:
+        text = p.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise InputError(f"{p}: not a text file; the script must be JSON or YAML text") from None
     try:
         data = json.loads(text) if p.suffix.lower() == ".json" else yaml.safe_load(text)
     except (json.JSONDecodeError, yaml.YAMLError) as exc:
@@ -61,20 +66,46 @@ def read_script(path: str | Path) -> tuple[str, list[dict]]:
     return name, ops
 
 
+def open_library(path: str | Path):
+    """The library at ``path`` opened for reading (a script only reads examples, so neither its lock nor
+    write access is needed); a writing open only to rebuild a missing or damaged catalog. ``InputError``
+    naming ``--library`` when it cannot be opened."""
+    import sqlite3
+
+    from arboretum_library.errors import ArboretumError, InputError
+    from arboretum_library.store import CatalogDamaged, Library
+
+    try:
+        try:
+            return Library.open(path, readonly=True)
+        except CatalogDamaged:
+            return Library.open(path)
+    except InputError as exc:
+        raise InputError(f"--library: {exc}") from None
+    except (ArboretumError, OSError, sqlite3.Error) as exc:
+        why = f"{exc.filename}: {exc.strerror}" if isinstance(exc, OSError) and exc.filename else str(exc)
+        raise InputError(f"--library {path}: cannot open the library ({why})") from None
+
+
 def run(args: argparse.Namespace) -> int:
     import tempfile
 
     from arboretum_library.codec import load_record, save_record
     from arboretum_library.model import Assembly
+    from arboretum_library.outputs import check_output
     from arboretum_library.progress import StatusLine
 
     from .script import Runner
 
+    # --out may be the --from session: it is read whole first and replaced atomically at the end (the
+    # demo continues a session in place); the script must never be overwritten
+    check_output(args.out, inputs=[args.script])
     name, ops = read_script(args.script)
     start = load_record(args.start, Assembly) if args.start else None
     with tempfile.TemporaryDirectory(prefix="arboretum-assemble-") as state:
         runner = Runner(Path(args.library), Path(state), name, start)
         try:
+            runner.ctx._library = open_library(args.library)  # read-only: the context closes it
             results = [runner.run(i, op, None if args.json else StatusLine()) for i, op in enumerate(ops)]
             assembly = runner.assembly()
         finally:

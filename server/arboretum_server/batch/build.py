@@ -19,14 +19,19 @@ A scan that cannot be read, is empty or holds no tree is reported (``ScanRecord.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
+import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from arboretum_library.errors import InputError
 from arboretum_library.pointio import READERS
+from arboretum_library.pointio_formats import sniff_not_points
 from arboretum_library.progress import ProgressFn, no_progress
 
 from .tasks import (
@@ -94,22 +99,38 @@ class BuildResult:
     workers: int = 0
     redone: int = 0
     """Scans found only in part and done again."""
+    ignored: list[tuple[str, str]] = field(default_factory=list)
+    """(path, why) of the files left out as recognisably not point clouds (``expand_scans``)."""
 
     def count(self, status: str) -> int:
         return sum(r.status == status for r in self.records)
 
 
-def expand_scans(paths: list[str]) -> list[str]:
-    """Files as given; folders replaced by their point-cloud files (known suffixes), sorted."""
+def expand_scans(paths: list[str], ignored: list[tuple[str, str]] | None = None) -> list[str]:
+    """Files as given; folders replaced by their point-cloud files (known suffixes), sorted. Files that
+    are recognisably not point clouds (``sniff_not_points``: a TreeQSM cylinder table, a licence) are
+    left out and appended to ``ignored`` as (path, why). ``InputError`` for a path that does not exist."""
     out: list[str] = []
+    left_out: list[tuple[str, str]] = []
     for p in paths:
         path = Path(p)
         if path.is_dir():
-            out.extend(str(f) for f in sorted(path.iterdir()) if f.is_file() and f.suffix.lower() in READERS)
+            files = [f for f in sorted(path.iterdir()) if f.is_file() and f.suffix.lower() in READERS]
+        elif path.exists():
+            files = [path]
         else:
-            out.append(str(p))
+            raise InputError(f"SCAN {p}: no such file or folder")
+        for f in files:
+            name, why = str(f) if path.is_dir() else str(p), sniff_not_points(f)
+            if why is None:
+                out.append(name)
+            else:
+                left_out.append((name, why))
     if not out:
-        raise InputError("no scans given (the folders hold no point-cloud files)")
+        reason = f": {left_out[0][0]} {left_out[0][1]}" if left_out else " (the folders hold no point-cloud files)"
+        raise InputError(f"no scans given{reason}")
+    if ignored is not None:
+        ignored.extend(left_out)
     return out
 
 
@@ -130,8 +151,9 @@ def build_library(scans: list[str], library: str | os.PathLike, options: BuildOp
     from arboretum_library.store import Library
 
     t0 = time.perf_counter()
-    records = [ScanRecord(p, species_for(p, options.species)) for p in expand_scans(scans)]
-    result = BuildResult(str(library), records)
+    ignored: list[tuple[str, str]] = []
+    records = [ScanRecord(p, species_for(p, options.species)) for p in expand_scans(scans, ignored)]
+    result = BuildResult(str(library), records, ignored=ignored)
     with Library.open(library, create=True, fsync=False) as lib:
         todo = _plan(lib, records, result)
         progress(0, max(len(todo), 1), _status(result, 0, len(todo)))
@@ -250,16 +272,40 @@ class _Cluster:
         # Workers inherit this process's environment, where an earlier default LocalCluster's nanny may
         # have left that variable (nannies os.environ.update() their pre-spawn environment): hide it.
         self.hidden = {k: os.environ.pop(k) for k in MALLOC_STATIC if k in os.environ}
-        with dask.config.set({"distributed.nanny.pre-spawn-environ": dict(WORKER_ENV), **WORKER_CONFIG}):
+        with dask.config.set({"distributed.nanny.pre-spawn-environ": dict(WORKER_ENV), **WORKER_CONFIG}), \
+                _workers_ignore_sigint():
             self.cluster = LocalCluster(n_workers=self.o.workers, threads_per_worker=1, processes=True,
                                         dashboard_address=None)
         self.client = Client(self.cluster)
         return self.client, "LocalCluster", self.o.workers
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, kind, *exc) -> None:
+        if kind is not None and issubclass(kind, KeyboardInterrupt):
+            # Ctrl-C: the workers are stopped, killed when busy in a task; Dask's warnings about that
+            # ("Worker process still alive after 4.0 seconds, killing") say nothing to the user
+            import logging
+
+            logging.getLogger("distributed").setLevel(logging.CRITICAL)
         if self.client is not None:
             self.client.close()
         if self.cluster is not None:
             self.cluster.close()
         os.environ.update(self.hidden)
+
+
+@contextlib.contextmanager
+def _workers_ignore_sigint() -> Iterator[None]:
+    """Ignore SIGINT while LocalCluster starts its worker processes, which keep ignoring it (an ignored
+    signal stays ignored across exec and Python then installs no KeyboardInterrupt handler): Ctrl-C in
+    the terminal reaches the whole process group, and only the client should handle it (cancel, shut the
+    cluster down) instead of every worker printing a KeyboardInterrupt traceback. A Ctrl-C during the
+    few seconds of start-up is lost. Outside the main thread (where signals cannot be set) a no-op."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 

@@ -3,8 +3,11 @@
     arboretum library build SCANS... --library LIB [--species S] [--workers N]
         [--scheduler tcp://HOST:8786] [--report DIR] [--points 12000] [--height 0.8] [--seed 0] [--json]
 
-SCANS are files or folders (every point-cloud file inside). Run it again after an interruption: scans
-already in the library are skipped. See docs/batch.md.
+SCANS are files or folders (every point-cloud file inside; files that are recognisably not point clouds,
+such as TreeQSM cylinder tables, are left out with a note). Run it again after an interruption: scans
+already in the library are skipped. Exit status: 0 when every scan was stored (or already there), 1 when
+any scan failed (the others are stored), 2 for a mistake in the arguments, 130 after Ctrl-C. A library
+this build created is removed again when nothing was stored in it. See docs/batch.md.
 """
 
 from __future__ import annotations
@@ -31,28 +34,70 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def check_args(args: argparse.Namespace) -> str:
+    """InputError naming the option for a bad argument, before any scan is read or worker started (the
+    checks of ``arboretum decompose``). Returns the report folder."""
+    import math
+    from pathlib import Path
+
+    from arboretum_library.errors import InputError
+    from arboretum_server.decompose.options import DecomposeOptions
+    from arboretum_server.decompose.preprocess import check_points
+
+    if args.points < 0 or not (math.isfinite(args.height) and args.height > 0):
+        raise InputError("--points must not be negative and --height must be a finite number > 0")
+    if args.seed < 0:
+        raise InputError(f"--seed must not be negative, got {args.seed}")
+    check_points(DecomposeOptions(points=args.points), "--points")
+    folder = args.report or f"{str(Path(args.library)).rstrip('/')}-report"
+    if Path(folder).exists() and not Path(folder).is_dir():
+        raise InputError(f"--report {folder}: is a file; the report is a folder (give a new or existing folder)")
+    lib = Path(args.library)
+    if lib.exists() and not lib.is_dir():
+        raise InputError(f"--library {lib}: is a file, not a library folder")
+    return folder
+
+
 def run(args: argparse.Namespace) -> int:
     import os
     from pathlib import Path
 
-    from arboretum_library.errors import InputError
     from arboretum_library.progress import StatusLine
 
     from .build import BuildOptions, build_library
     from .report import as_dict, write_report
 
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-    if args.points < 0 or not args.height > 0:
-        raise InputError("--points must be >= 0 and --height > 0")
+    folder = check_args(args)
     opts = BuildOptions(species=args.species, workers=args.workers, scheduler=args.scheduler,
                         points=args.points, height=args.height, seed=args.seed)
     status = StatusLine() if not args.json else (lambda *a: None)
-    result = build_library(args.scans, args.library, opts, status)
-    folder = args.report or f"{str(Path(args.library)).rstrip('/')}-report"
+    created = not Path(args.library).exists()
+    try:
+        result = build_library(args.scans, args.library, opts, status)
+    except BaseException:
+        if created:
+            drop_if_empty(args.library)
+        raise
     files = write_report(result, folder)
-    data = {**as_dict(result), "report": files}
+    dropped = created and drop_if_empty(args.library)
+    data = {**as_dict(result), "report": files, "library_kept": not dropped}
     emit(args, data, _text(data))
-    return 0
+    return 1 if result.count("failed") else 0
+
+
+def drop_if_empty(library: str) -> bool:
+    """Remove the library folder when it holds no example (a build that created it stored nothing);
+    whether it was removed."""
+    import shutil
+    from pathlib import Path
+
+    root = Path(library)
+    examples = root / "examples"
+    if not (root / "library.json").is_file() or (examples.is_dir() and any(examples.iterdir())):
+        return False
+    shutil.rmtree(root, ignore_errors=True)
+    return True
 
 
 def _text(d: dict) -> str:
@@ -61,5 +106,8 @@ def _text(d: dict) -> str:
              f"on {d['workers']} workers ({d['cluster'] or 'no cluster needed'})"]
     lines += [f"  failed: {r['path']}: {r['error']}" for r in d["records"] if r["status"] == "failed"]
     lines += [f"  note: {r['path']}: {n}" for r in d["records"] for n in r["notes"]]
+    lines += [f"  left out: {i['path']}: {i['why']}" for i in d.get("ignored", [])]
+    if not d.get("library_kept", True):
+        lines.append(f"  nothing was stored: the library {d['library']} this build created was removed")
     lines.append(f"report: {d['report'].get('markdown', '')}")
     return "\n".join(lines)

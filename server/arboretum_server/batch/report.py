@@ -37,6 +37,7 @@ def as_dict(result: BuildResult) -> dict[str, Any]:
         "records": [{"path": r.path, "species": r.species, "status": r.status, "sha256": r.sha256,
                      "examples": r.examples, "error": r.error, "seconds": r.seconds,
                      "points": r.stats.get("points_read"), "notes": r.notes} for r in result.records],
+        "ignored": [{"path": p, "why": why} for p, why in result.ignored],
     }
 
 
@@ -124,6 +125,9 @@ def markdown(data: dict[str, Any], plots: dict[str, str]) -> str:
         lines.append(f"| {k} | {_cell(Path(r['path']).name)} | {_cell(r['species'])} | {r['status']} | "
                      f"{len(r['examples'])} | {r['points'] if r['points'] is not None else ''} | "
                      f"{'' if secs is None else f'{secs:.2f}'} | {_cell(note)} |")
+    if data.get("ignored"):
+        lines += ["", "Left out (not point clouds):", ""]
+        lines += [f"- {_cell(Path(i['path']).name)}: {_cell(i['why'])}" for i in data["ignored"]]
     return "\n".join(lines) + "\n"
 
 

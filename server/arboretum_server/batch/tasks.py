@@ -34,13 +34,29 @@ WORKER_CONFIG = {
     "distributed.admin.tick.interval": "1s",
     "distributed.admin.system-monitor.interval": "5s",
     "distributed.worker.memory.monitor-interval": "5s",
+    "distributed.worker.preload": ["arboretum_server.batch.tasks"],
 }
 """Dask settings of LocalCluster workers: no statistical profiler (it samples the task's stack every
-10 ms) and slower housekeeping ticks; together about 8 % of a scan's time on this machine (measured)."""
+10 ms) and slower housekeeping ticks; together about 8 % of a scan's time on this machine (measured).
+The preload runs ``dask_setup`` in every worker."""
 SCAN_EXAMPLES_KEY = "scan_examples"
 """Provenance parameter holding how many examples the scan gave (to tell a complete scan on resume)."""
 NOTES_KEY = "decompose_notes"
 """Provenance parameter holding the scan's decomposition notes (reported again when a rerun skips it)."""
+
+
+def dask_setup(worker: Any) -> None:
+    """Run by Dask in each LocalCluster worker as it starts (``WORKER_CONFIG``'s preload): Ctrl-C is the
+    client's to handle (it cancels the tasks and shuts the cluster down), so a worker ignores SIGINT (it
+    is started with SIGINT ignored too: ``build._workers_ignore_sigint``) and does not warn about the
+    tasks cancelled then ("Async instruction ... ended with CancelledError")."""
+    import logging
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    logging.getLogger("distributed.worker.state_machine").setLevel(logging.ERROR)
 
 
 @dataclass(frozen=True)
