@@ -450,7 +450,9 @@ def test_cli_stores_examples_and_saves_hbl(truth, tmp_path, capsys):
         ("--points", "10"): "--points 10 leaves too few points", ("--seed", "-1"): "--seed must not be negative",
         ("--height", "inf"): "--height must be a finite number", ("--lobes", "100000"): "lobes: 100000 asked",
         ("--main", "1000"): "main branches: 1000 asked", ("--save-hbl", str(tmp_path)): "is a folder",
-        ("--save-hbl", str(tmp_path / "no" / "x.npz")): "folder that does not exist",
+        ("--save-hbl", str(tmp_path / "no" / "x.npz")): "does not exist",
+        ("--save-hbl", str(scan)): "writes .npz files, not .xyz",  # it used to turn the scan into a zip
+        ("--save-hbl", str(tmp_path / "x.ply")): "not .ply",
     }
     for (flag, value), message in refused.items():
         assert main(["decompose", str(scan), flag, value, "--up", "z", "--library", str(lib)]) == 2

@@ -11,6 +11,7 @@ import argparse
 import math
 import os
 import shutil
+import sys
 import time
 from contextlib import contextmanager
 
@@ -64,6 +65,7 @@ def _options(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
+    from arboretum_library.outputs import check_output
     from arboretum_library.pointio import ReadOptions, read_points
     from arboretum_library.progress import StatusLine
 
@@ -71,7 +73,8 @@ def run(args: argparse.Namespace) -> int:
 
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     options = _options(args)
-    _check_output(args.save_hbl)
+    if args.save_hbl:  # before the scan is read; never the scan itself
+        check_output(args.save_hbl, "--save-hbl", inputs=[args.scan], suffixes=(".npz",))
     t0 = time.perf_counter()
     cloud = read_points(args.scan, ReadOptions(up=args.up))
     t_read = time.perf_counter() - t0
@@ -102,7 +105,9 @@ def _library(path: str | None):
 
     created = not os.path.exists(path)
     try:
-        with Library.open(path, create=True) as lib:
+        # a decomposition takes seconds: wait for another writer as long as it takes, saying so
+        with Library.open(path, create=True, lock_timeout=None,
+                          on_wait=lambda m: print(m, file=sys.stderr, flush=True)) as lib:
             yield lib
     except BaseException:
         if created:
@@ -142,18 +147,6 @@ def _store(lib, dec, scan: str, options) -> tuple[list, list[str]]:
     stem = os.path.splitext(os.path.basename(scan))[0]
     examples = lib.add_new(make_examples(dec.hbl, prov, counter_ids("new")), stem)
     return examples, [e.id for e in examples]
-
-
-def _check_output(path: str | None) -> None:
-    """InputError unless ``path`` (the --save-hbl target) can be a file in an existing folder."""
-    from arboretum_library.errors import InputError
-
-    if path is None:
-        return
-    folder = os.path.dirname(os.path.abspath(path))
-    if os.path.isdir(path) or not os.path.isdir(folder):
-        what = "is a folder" if os.path.isdir(path) else f"is in a folder that does not exist ({folder})"
-        raise InputError(f"--save-hbl {path} {what}")
 
 
 def _text(d: dict) -> str:
