@@ -527,6 +527,24 @@ def test_a_straight_line_gets_a_note(tmp_path, capsys):
     assert [n for n in data["notes"] if n.startswith("the cloud is nearly a straight line")]
 
 
+def test_a_tree_kept_in_scan_units_of_no_tree_size_gets_a_note(truth, tmp_path, capsys):
+    # a scan in millimetres decomposed with --height 0 (keep the scan's units) made a 3,704 m tree
+    # without a word; at the default --height (0.8 m) units do not matter and there is no note
+    from arboretum_library.cli import main
+
+    pts = toy_scan(truth, 6000)[0]
+    scan = tmp_path / "mm.xyz"
+    np.savetxt(scan, pts * 1000.0)
+    args = ["decompose", str(scan), "--up", "z", "--main", "4", "--lobes", "10", "--json"]
+    assert main([*args, "--height", "0"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert abs(data["stats"]["height"] - 1000.0 * np.ptp(pts[:, 2])) < 0.02 * 1000.0 * np.ptp(pts[:, 2])
+    (note,) = [n for n in data["notes"] if "scan units tall, kept as metres" in n]
+    assert "taller than any tree" in note and "--height METRES" in note
+    assert main(args) == 0
+    assert not [n for n in json.loads(capsys.readouterr().out)["notes"] if "scan units tall" in n]
+
+
 def test_virtual_scanner_leaf_off_tree_meets_the_floor():
     from arboretum_server.decompose.report import synth_figures
 

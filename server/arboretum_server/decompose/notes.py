@@ -7,6 +7,9 @@ from .options import DEFAULT_COUNTS, SPECIES_COUNTS, DecomposeOptions
 
 LINE = 0.03
 """A cloud whose ``width_ratio`` is under this gets a note: it is a pole or a stick, not a tree."""
+TREE_HEIGHTS = (0.05, 150.0)
+"""Heights in metres a tree can have (the tallest measured: 116 m); a tree kept in its scan's units
+(``--height 0``) outside them gets a note (a scan in millimetres reads as a 3,704 m tree)."""
 ALL_LEAF = 0.95
 """A cloud with at least this fraction of foliage points gets a note: its branches have no wood to follow
 (the bundled real scans measure 2-37 % foliage, the synthetic test trees 1-70 %, a tall Gaussian blob
@@ -28,6 +31,11 @@ def result_notes(options: DecomposeOptions, stats: dict) -> list[str]:
                    "merged into them (Algorithm 1)")
     if stats.get("lobes", n_l) < n_l:
         out.append(f"{stats['lobes']} lobes made, {n_l} asked: too few foliage points")
+    h = stats.get("height")
+    if options.height is None and h is not None and not TREE_HEIGHTS[0] <= h <= TREE_HEIGHTS[1]:
+        out.append(f"the tree is {h:.4g} scan units tall, kept as metres (--height 0): "
+                   f"{'taller than any tree' if h > TREE_HEIGHTS[1] else 'smaller than a seedling'}; "
+                   "if the scan is in other units, pass --height METRES")
     return out + scan_notes(stats)
 
 

@@ -22,7 +22,7 @@ from .graph import Graph, gap_graph, knn_graph, shortest_paths, weighted
 from .grid import BoxGrid
 from .lobes import kmeans
 from .merge import drop, merge_mains, select_mains
-from .options import DecomposeOptions
+from .options import WORK_HEIGHT, DecomposeOptions
 from .preprocess import prepare
 from .radii import trunk_radius
 from .sampling import farthest_points
@@ -183,7 +183,8 @@ def decompose(points: np.ndarray, options: DecomposeOptions = DecomposeOptions()
     lobe_of = np.full(len(pts), -1, np.int32)
     lobe_of[fol] = k_lab
     stats = {
-        "points": len(pts), "leaf_points": int((lab == LEAF).sum()), "ground_removed": prep.ground_removed,
+        "points": len(pts), "height": WORK_HEIGHT / prep.scale, "leaf_points": int((lab == LEAF).sum()),
+        "ground_removed": prep.ground_removed,
         "trunk_columns": [c._asdict() | {"foot": list(c.foot)} for c in prep.columns], "width_ratio": width_ratio(pts),
         "labels": "given" if prep.labels is not None else "guessed",
         "components": g.components, "bridges": g.bridges, "foliage_source": source,
