@@ -25,7 +25,7 @@ import signal
 import threading
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -237,8 +237,7 @@ def _store(lib, r: ScanRecord, out: ScanOutcome | str) -> None:
         r.status, r.error = "failed", out.error
         return
     stem = "".join(c if c.isalnum() or c in "-_" else "-" for c in Path(r.path).stem) or "scan"
-    for ex in out.examples:
-        r.examples.append(lib.add(replace(ex, id=lib.new_id(stem))))
+    r.examples.extend(e.id for e in lib.add_new(out.examples, stem))  # ids picked under the lock, all or none
     r.status = "added"
 
 
