@@ -241,13 +241,13 @@ def test_fsync_makes_snapshot_rename_and_deletion_durable(tmp_path, monkeypatch)
 @pytest.mark.parametrize(("kwargs", "match"), [
     ({"scale": 1e308}, "Placement.scale"), ({"scale": 1e-300}, "Placement.scale"),
     ({"T_world_example": make_transform(t=[1e308, 0, 0])}, "translation"),
-    ({"T_world_example": make_transform(t=[0, 2e6, 0])}, "translation"),
+    ({"T_world_example": make_transform(t=[0, 2e7, 0])}, "translation"),
 ])
 def test_placement_values_are_bounded(kwargs, match):
     args = {"instance": "a", "example_id": "ex", "T_world_example": np.eye(4), **kwargs}
     with pytest.raises(ValidationError, match=match):
         Placement(**args)
-    assert Placement("a", "ex", make_transform(t=[1e6, 0, 0]), 1e3).scale == 1e3
+    assert Placement("a", "ex", make_transform(t=[5.5e6, 0, 0]), 1e3).scale == 1e3  # a UTM northing
 
 
 def test_lobe_transforms_must_be_bounded_similarities():
@@ -292,10 +292,10 @@ def test_session_load_refuses_huge_lobe_index_and_bad_links(server):
 
 def test_largest_accepted_placement_still_assembles(server):
     sid = ok(server, P.SessionNew()).session
-    ok(server, P.AddExample(session=sid, example_id="ex-0", T_world_example=make_transform(t=[1e6, -1e6, 1e6]),
+    ok(server, P.AddExample(session=sid, example_id="ex-0", T_world_example=make_transform(t=[1e7, -1e7, 1e7]),
                             scale=1e3))
     hbl = ok(server, P.SessionHBL(session=sid)).hbl
-    assert np.isfinite(hbl.branches[0].points).all() and np.isclose(hbl.root[0], 1e6)
+    assert np.isfinite(hbl.branches[0].points).all() and np.isclose(hbl.root[0], 1e7)
     err(server, P.AddExample(session=sid, example_id="ex-0", T_world_example=np.eye(4), scale=1e308),
         "bad_input", "Placement.scale")
 
@@ -325,7 +325,7 @@ def test_stroke_limits_are_checked_before_any_work(server, monkeypatch):
 def test_strokes_far_out_or_too_long_are_clear_errors(server):
     sid = ok(server, P.SessionNew()).session
     huge = np.array([[0, 0, 0], [0, 0, 1e300], [0, 1e300, 1e300]], float)
-    err(server, P.SketchExample(session=sid, stroke_points=huge, stroke_sizes=np.array([3])), "bad_input", "1e+06 m")
+    err(server, P.SketchExample(session=sid, stroke_points=huge, stroke_sizes=np.array([3])), "bad_input", "1e+07 m")
     err(server, P.RecognizeStrokes(stroke_points=huge, stroke_sizes=np.array([3])), "bad_input", "stroke sample")
     long = np.array([[0, 0, 0], [0, 0, 2e4]], float)
     err(server, P.SketchExample(session=sid, stroke_points=long, stroke_sizes=np.array([2])), "bad_input", "long together")

@@ -235,8 +235,9 @@ class Example:
 MIN_SCALE, MAX_SCALE = 1e-3, 1e3
 """Range of the uniform scale of a placement or a lobe edit: far beyond any real use, narrow enough that
 every product of the transforms stays finite and well-conditioned in float64."""
-MAX_OFFSET = 1e6
-"""Largest translation, metres, of a placement or a lobe edit along any axis (1,000 km)."""
+MAX_OFFSET = 1e7
+"""Largest translation, metres, of a placement or a lobe edit along any axis (10,000 km: a tree placed
+at its UTM northing, up to 9,300 km, or at geocentric coordinates, up to 6,400 km, still fits)."""
 
 
 def _check_scale(where: str, s: float) -> None:
