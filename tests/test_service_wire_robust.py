@@ -126,11 +126,14 @@ def test_remote_retrying_while_its_job_waits_in_the_queue_gets_the_reply(served,
 def test_a_queued_job_keeps_its_client_waiting_with_progress_notes(served, tmp_path):
     block(served, 30)
     events: list = []
-    with Remote(served.endpoint, timeout=2.0, retries=0) as r:  # no retry: the notes restart its timeout
+    # no retry: the notes restart its timeout (2 s failed 3 of 4 runs on a loaded machine: a spawned
+    # worker took 1.6 s before the job's reply; a 'starting' note now comes when it leaves the queue)
+    with Remote(served.endpoint, timeout=5.0, retries=0) as r:
         f = r.call(P.ExportMesh(session="s", format="queued", seed=1), progress=lambda *a: events.append(a))
     assert f.stats == {"seconds": 0.1} and runs(tmp_path, "queued") == 1
     notes = [e for e in events if e[2].startswith("waiting for a free worker")]
     assert len(notes) >= 2 and notes[0] == (0.0, 0.0, "waiting for a free worker (1 in the queue)")
+    assert events.index((0.0, 0.0, "starting")) > events.index(notes[-1])
 
 
 def test_job_runner_rekeys_a_queued_job():
@@ -151,18 +154,20 @@ def test_job_runner_rekeys_a_queued_job():
 
 # -- 2. replies and jobs belong to one client -----------------------------------------------------
 def test_two_clients_with_the_same_request_id_get_their_own_replies(served):
+    # with tokens (every Remote sends one) the same id from two clients is two requests
     a, b = dealer(served), dealer(served)
-    alice = ask(a, P.SessionNew(name="alice"), 7)
-    bob = ask(b, P.SessionNew(name="bob"), 7)
-    assert (alice.name, bob.name) == ("alice", "bob") and alice.session != bob.session
     carol = ask(b, P.SessionNew(name="carol"), 8, client="tok-c")
     dave = ask(a, P.SessionNew(name="dave"), 8, client="tok-d")
-    assert (carol.name, dave.name) == ("carol", "dave")
-    ea = ask(a, P.AddExample(session=alice.session, example_id="ex-0", T_world_example=np.eye(4)), 9)
-    eb = ask(b, P.AddExample(session=bob.session, example_id="ex-1", T_world_example=np.eye(4)), 9)
+    assert (carol.name, dave.name) == ("carol", "dave") and carol.session != dave.session
+    ea = ask(a, P.AddExample(session=dave.session, example_id="ex-0", T_world_example=np.eye(4)), 9, client="tok-d")
+    eb = ask(b, P.AddExample(session=carol.session, example_id="ex-1", T_world_example=np.eye(4)), 9, client="tok-c")
     assert (ea.instance, eb.instance) == ("ex-0#1", "ex-1#1")
-    got = ask(a, P.SessionGet(session=alice.session), 10)
+    got = ask(a, P.SessionGet(session=dave.session), 10, client="tok-d")
     assert [p.example_id for p in got.assembly.placements] == ["ex-0"] and got.revision == 1
+    # without tokens clients share one id space (protocol 1): the second gets the first's reply
+    alice = ask(a, P.SessionNew(name="alice"), 7)
+    bob = ask(b, P.SessionNew(name="bob"), 7)
+    assert (alice.name, bob.name) == ("alice", "alice") and alice.session == bob.session
 
 
 def test_a_client_token_makes_a_retry_on_a_new_socket_safe(served):
@@ -172,16 +177,11 @@ def test_a_client_token_makes_a_retry_on_a_new_socket_safe(served):
     assert ask(dealer(served), add, 42, "tok-1").revision == 1
     assert ask(dealer(served), add, 42, "tok-1").revision == 1  # the retry: answered from the cache
     assert ask(dealer(served), add, 42, "tok-2").revision == 2  # another client, the same id: its own edit
-    assert ask(dealer(served), add, 42).revision == 3  # no token: keyed by its (new) socket
+    # no token (an older client's lazy-pirate retry on a new socket): answered from the cache, not
+    # applied twice (keyed by socket for a while, it was: a reviewer's regression)
+    assert ask(dealer(served), add, 43).revision == 3
+    assert ask(dealer(served), add, 43).revision == 3
     assert ask(s, P.SessionGet(session=sid), 2).revision == 3
-    for _ in range(2):  # a fixed routing id also keys a retry on a new socket to the same client
-        fixed = zmq.Context.instance().socket(zmq.DEALER)
-        fixed.setsockopt(zmq.LINGER, 0)
-        fixed.setsockopt(zmq.RCVTIMEO, 10000)
-        fixed.setsockopt(zmq.ROUTING_ID, b"fixed-id")
-        fixed.connect(served.endpoint)
-        assert ask(fixed, add, 43).revision == 4
-        fixed.close(0)
 
 
 def test_client_tokens_on_the_wire():
@@ -315,6 +315,10 @@ def test_a_req_socket_is_served(served):
     r.send_multipart([header(id=5, type="no.such")])
     rid, reply = P.parse(r.recv_multipart())
     assert (rid, reply.code) == (5, "unknown_type")
+    # a header beyond 64 KiB or 64 entries (library.list with 65 tags) was missed: no reply at all
+    r.send_multipart(P.to_frames(P.LibraryList(tags=tuple(f"tag{i}" for i in range(65))), 6))
+    rid, reply = P.parse(r.recv_multipart())
+    assert rid == 6 and isinstance(reply, P.LibraryEntries) and reply.entries == ()
     d = dealer(served)  # a DEALER sending an empty first frame and garbage is answered without a delimiter
     d.send_multipart([b"", b"\xc1garbage"])
     frames = d.recv_multipart()

@@ -116,6 +116,7 @@ class JobRunner:
         self._queue: deque[tuple[Hashable, Job]] = deque()
         self._running: dict[Hashable, _Running] = {}
         self._pending_cancel: list[Hashable] = []
+        self._started: list[Hashable] = []
 
     def submit(self, key: Hashable, job: Job) -> None:
         """Start ``job`` now or queue it; ``Busy`` when ``max_queued`` jobs already wait."""
@@ -124,9 +125,14 @@ class JobRunner:
         self._queue.append((key, job))
         self._start_queued()
 
-    def _start_queued(self) -> None:
+    def _start_queued(self, note: bool = False) -> None:
+        """Start queued jobs while workers are free; with ``note``, ``poll`` then reports each as a
+        'starting' progress event (a spawned worker takes a second or more before its first own event,
+        and the client's timeout runs meanwhile)."""
         while self._queue and len(self._running) < self.workers:
             key, job = self._queue.popleft()
+            if note:
+                self._started.append(key)
             recv, send = self._ctx.Pipe(duplex=False)
             cancel = self._ctx.Event()
             p = self._ctx.Process(target=_worker, args=(send, cancel, job.target, job.kwargs), daemon=True)
@@ -150,6 +156,7 @@ class JobRunner:
 
     def rekey(self, old: Hashable, new: Hashable) -> bool:
         """Deliver job ``old``'s events under ``new``, whether it runs or still waits in the queue."""
+        self._started = [new if k == old else k for k in self._started]
         if old in self._running:
             r = self._running.pop(old)
             r.key = new
@@ -178,6 +185,8 @@ class JobRunner:
         out: list[tuple[Hashable, str, Any, Job | None]] = [
             (k, "error", ("cancelled", "cancelled by the client"), None) for k in self._pending_cancel]
         self._pending_cancel = []
+        out += [(k, "progress", (0.0, 0.0, "starting"), self._running[k].job) for k in self._started if k in self._running]
+        self._started = []
         for key, r in list(self._running.items()):
             ended = self._drain(r, out)
             if not ended and r.cancelled_at and time.monotonic() - r.cancelled_at > CANCEL_GRACE_S:
@@ -189,7 +198,7 @@ class JobRunner:
                 ended = True
             if ended:
                 self._reap(key)
-        self._start_queued()
+        self._start_queued(note=True)
         return out
 
     def _drain(self, r: _Running, out: list) -> bool:

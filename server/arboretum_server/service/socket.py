@@ -4,7 +4,8 @@ One thread polls the socket and the job workers' pipes. A request is parsed into
 (anything malformed gets an ``Error`` reply, or is dropped when not even an id can be read back), handled
 inline when quick, or handed to the ``JobRunner`` when its handler returns a ``Job``; job progress goes
 back to the requesting peer as ``Progress`` events. Requests are keyed by (origin, id, type), the origin
-being the header's "client" token (the same in all retries of a ``Remote``) or else the socket: a
+being the header's "client" token (the same in all retries of a ``Remote``), or one shared origin for
+clients without one (protocol 1's lazy-pirate retries come from a new socket): a
 retried job answers the socket of its latest retry, and a retried request that changes something is
 answered from the ``ReplyCache``, never run twice. ``SendBudget`` bounds the bytes queued for peers
 that do not read their replies. REQ peers work too (their empty delimiter frame is kept as routing).
@@ -206,7 +207,7 @@ class Server:
         if len(frames) < 2:
             return
         route, body = (bytes(frames[0]),), frames[1:]
-        if len(body) > 1 and not len(body[0]) and isinstance(_peek_header(body[1]), dict):
+        if len(body) > 1 and not len(body[0]) and _is_header(body[1]):
             route, body = (route[0], b""), body[1:]  # a REQ peer: an empty delimiter, then a header
         try:
             rid, client, req = parse_request(body, self.limits)
@@ -219,7 +220,9 @@ class Server:
             return
         self.handled += 1
         try:
-            self._on_request(route, (client or route[0], rid, req.TYPE), req)
+            # without a token, clients share one id space, as in protocol 1 before tokens: a retry on
+            # a new socket (lazy pirate) must find its reply (use random 63-bit ids, as Remote does)
+            self._on_request(route, (client or b"", rid, req.TYPE), req)
         except Exception as exc:  # never let one request take the loop down
             self._send(route, rid, error_reply(exc, req.TYPE))
 
@@ -311,6 +314,18 @@ def _peek_id(frame: Any) -> int:
     h = _peek_header(frame)
     rid = h.get("id", 0) if isinstance(h, dict) else 0
     return rid if isinstance(rid, int) and not isinstance(rid, bool) and 0 <= rid < 1 << 63 else 0
+
+
+def _is_header(frame: Any, limit: int = 1 << 20) -> bool:
+    """Whether ``frame`` decodes as a msgpack map of at most ``limit`` bytes: a header of any size a
+    request may have (a REQ peer's 65-tag ``library.list`` outgrew ``_peek_header``'s limits)."""
+    if len(frame) > limit:
+        return False
+    try:
+        return isinstance(msgpack.unpackb(bytes(frame), raw=False, max_bin_len=limit, max_ext_len=0,
+                                          max_array_len=limit, max_map_len=limit, max_str_len=limit), dict)
+    except Exception:
+        return False
 
 
 def _peek_header(frame: Any) -> Any:
