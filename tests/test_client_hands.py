@@ -141,3 +141,28 @@ def test_the_wheel_scales_while_the_grip_is_held_and_zooms_otherwise():
     desk.handle(MouseButton("right", False))
     desk.handle(Scroll(1))
     assert desk.camera.distance == pytest.approx(3.6)
+
+
+def test_the_wheel_scale_is_bounded_and_an_out_of_range_preview_draws_nothing():
+    # 70 wheel steps took the grip scale past the model's placement range (then 1e-3..1e3): the drag
+    # preview raised ValidationError in the main loop (a reviewer's case)
+    from arboretum_client.input.desktop import GRIP_SCALE, Scroll
+    from arboretum_client.overlay import overlay_scene
+    from arboretum_client.tools.interaction import Drag
+    from arboretum_client.tools.state import ClientState
+    from arboretum_library.model import Assembly
+
+    desk = DesktopInput(Camera(target=(0, 0, 1), distance=4.0), (640, 480))
+    desk.handle(MouseMove(320, 240))
+    desk.handle(MouseButton("right", True))
+    for _ in range(80):
+        desk.handle(Scroll(1))
+    assert {h.side: h for h in desk.samples()}[RIGHT].scale == GRIP_SCALE
+    ex = demo_example("oak", 1)
+    st = ClientState()
+    st.examples[ex.id] = ex
+    st.assembly = Assembly(placements=(Placement(f"{ex.id}#1", ex.id, np.eye(4), 50.0),))
+    for name in (f"inst:{ex.id}#1/branch:0", f"inst:{ex.id}#1/lobe:1"):
+        fine = overlay_scene(st, [], {"right": Drag("right", name, np.eye(4), 2.0)}, 5.0)
+        huge = overlay_scene(st, [], {"right": Drag("right", name, np.eye(4), 2e6)}, 5.0)  # past 1e6
+        assert len(huge.items) == 0 < len(fine.items)

@@ -239,7 +239,7 @@ def test_fsync_makes_snapshot_rename_and_deletion_durable(tmp_path, monkeypatch)
 
 # -- 5: values that used to break a session -------------------------------------------------------------
 @pytest.mark.parametrize(("kwargs", "match"), [
-    ({"scale": 1e308}, "Placement.scale"), ({"scale": 1e-300}, "Placement.scale"),
+    ({"scale": 1e308}, "Placement.scale"), ({"scale": 1e-300}, "Placement.scale"), ({"scale": 2e6}, "Placement.scale"),
     ({"T_world_example": make_transform(t=[1e308, 0, 0])}, "translation"),
     ({"T_world_example": make_transform(t=[0, 2e7, 0])}, "translation"),
 ])
@@ -247,7 +247,8 @@ def test_placement_values_are_bounded(kwargs, match):
     args = {"instance": "a", "example_id": "ex", "T_world_example": np.eye(4), **kwargs}
     with pytest.raises(ValidationError, match=match):
         Placement(**args)
-    assert Placement("a", "ex", make_transform(t=[5.5e6, 0, 0]), 1e3).scale == 1e3  # a UTM northing
+    assert Placement("a", "ex", make_transform(t=[5.5e6, 0, 0]), 1e6).scale == 1e6  # a UTM northing
+    assert Placement("a", "ex", np.eye(4), 0.0005).scale == 0.0005  # legal in sessions saved before the bound
 
 
 def test_lobe_transforms_must_be_bounded_similarities():
@@ -293,7 +294,7 @@ def test_session_load_refuses_huge_lobe_index_and_bad_links(server):
 def test_largest_accepted_placement_still_assembles(server):
     sid = ok(server, P.SessionNew()).session
     ok(server, P.AddExample(session=sid, example_id="ex-0", T_world_example=make_transform(t=[1e7, -1e7, 1e7]),
-                            scale=1e3))
+                            scale=1e6))
     hbl = ok(server, P.SessionHBL(session=sid)).hbl
     assert np.isfinite(hbl.branches[0].points).all() and np.isclose(hbl.root[0], 1e7)
     err(server, P.AddExample(session=sid, example_id="ex-0", T_world_example=np.eye(4), scale=1e308),

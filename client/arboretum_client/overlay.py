@@ -10,6 +10,7 @@ import dataclasses
 
 import numpy as np
 
+from arboretum_library.errors import ValidationError
 from arboretum_library.model import LobeTransform
 
 from .assembly_view import placed_hbl
@@ -40,6 +41,15 @@ def _line(points: np.ndarray, color, width: float = 3.0) -> Polyline | None:
 
 
 def _preview(state: ClientState, drag: Drag) -> list:
+    """Lines of the dragged placement or lobe where the drag would put it; none where that is out of
+    the model's range (a scale beyond 1e3, say: the server refuses such an edit too)."""
+    try:
+        return _preview_lines(state, drag)
+    except ValidationError:
+        return []
+
+
+def _preview_lines(state: ClientState, drag: Drag) -> list:
     inst, kind, idx = parse(drag.name)
     p = next((p for p in state.assembly.placements if p.instance == inst), None)
     ex = state.examples.get(p.example_id) if p is not None else None

@@ -232,9 +232,10 @@ class Example:
         object.__setattr__(self, "tags", tuple(sorted({t.lower() for t in self.tags})))
 
 
-MIN_SCALE, MAX_SCALE = 1e-3, 1e3
-"""Range of the uniform scale of a placement or a lobe edit: far beyond any real use, narrow enough that
-every product of the transforms stays finite and well-conditioned in float64."""
+MIN_SCALE, MAX_SCALE = 1e-6, 1e6
+"""Range of the uniform scale of a placement or a lobe edit: far beyond any real use (sessions saved
+before the bound held scales like 0.0005, and a tighter range made them unreadable), narrow enough
+that every product of the transforms stays finite in float64 (a scale of 1e308 made NaNs)."""
 MAX_OFFSET = 1e7
 """Largest translation, metres, of a placement or a lobe edit along any axis (10,000 km: a tree placed
 at its UTM northing, up to 9,300 km, or at geocentric coordinates, up to 6,400 km, still fits)."""

@@ -24,6 +24,9 @@ from arboretum_client.camera import Camera
 
 from .hands import LEFT, RIGHT, HandSample
 
+GRIP_SCALE = 100.0
+"""The wheel scales what a hand holds by at most this factor up or down in one grab."""
+
 
 @dataclass(frozen=True)
 class MouseMove:
@@ -92,7 +95,10 @@ class DesktopInput:
         elif isinstance(event, MouseButton):
             self._button(event.button, event.pressed)
         elif isinstance(event, Scroll) and "grip" in self.hand_buttons[self.active]:
-            self.grip_scale[self.active] *= 1.1 ** event.dy  # scale what the hand holds
+            # scale what the hand holds, within GRIP_SCALE of where the grab began (unbounded, 70 wheel
+            # steps left the model's scale range and the preview raised in the main loop)
+            g = self.grip_scale[self.active] * 1.1 ** event.dy
+            self.grip_scale[self.active] = min(max(g, 1.0 / GRIP_SCALE), GRIP_SCALE)
         elif isinstance(event, Scroll):
             self.camera = dataclasses.replace(self.camera, distance=max(self.camera.distance * 0.9 ** event.dy, 0.05))
         elif isinstance(event, Key):
