@@ -298,3 +298,33 @@ def test_a_reader_that_cannot_rebuild_says_so_in_one_line(lib_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"the catalog {lib_path / 'catalog.sqlite'} is damaged" in err[0]
     assert "rebuilds it" in err[0] and "this process cannot write the library" in err[0]
+
+
+@pytest.mark.parametrize("mode", ["skip", "rename"])
+def test_three_processes_importing_one_archive_never_collide(tmp_path, mode):
+    # apply_archive checked "id in lib" and picked new ids outside the write lock: one of two importers
+    # stopped part-way with "already exists" (rename: 92 examples instead of 80; a reviewer's case)
+    with Library.open(tmp_path / "src", create=True, fsync=False) as src:
+        for i in range(60):
+            src.add(make_example(np.random.default_rng(i), id=f"ex-{i}", n_lobes=3, n_points=300))
+        src.export_archive(tmp_path / "a.tar")
+    with Library.open(tmp_path / "dst", create=True, fsync=False) as dst:
+        for i in range(60 if mode == "rename" else 0):
+            dst.add(make_example(np.random.default_rng(100 + i), id=f"ex-{i}", n_lobes=3, n_points=300))
+    code = (f"from arboretum_library.archive import apply_archive, check_archive\n"
+            f"from arboretum_library.store import Library\n"
+            f"from pathlib import Path\n"
+            f"c = check_archive(Path({str(tmp_path / 'a.tar')!r}))\n"
+            f"with Library.open({str(tmp_path / 'dst')!r}, fsync=False) as lib:\n"
+            f"    r = apply_archive(lib, c, {mode!r})\n"
+            f"print(len(r.added), len(r.skipped), len(r.renamed))\n")
+    procs = [subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for _ in range(3)]
+    outs = [p.communicate(timeout=120) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0, 0], [o[1][-300:] for o in outs]
+    counts = sorted(tuple(int(v) for v in o[0].split()) for o in outs)
+    with Library.open(tmp_path / "dst", readonly=True) as dst:
+        if mode == "skip":
+            assert sum(c[0] for c in counts) == 60 and sum(c[1] for c in counts) == 120 and len(dst) == 60
+        else:
+            assert counts == [(0, 0, 60)] * 3 and len(dst) == 240

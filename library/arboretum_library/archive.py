@@ -186,20 +186,25 @@ def apply_archive(lib, checked: CheckedArchive, on_conflict: str = "skip",
     with tf:
         for i, id_ in enumerate(checked.ids):
             example, meta, npz = _load(tf, by_name, checked.path, id_)
-            if id_ not in lib:
-                lib.put_encoded(example, meta, npz)
-                report.added.append(id_)
-            elif on_conflict == "skip":
-                report.skipped.append(id_)
-            elif on_conflict == "replace":
-                lib.put_encoded(example, meta, npz, replace=True)
-                report.replaced.append(id_)
-            else:
-                renamed = dataclasses.replace(example, id=lib.new_id(id_))
-                lib.put_encoded(renamed, *encode(renamed, json.loads(meta)["created"]))
-                report.renamed[id_] = renamed.id
+            with lib._lock():  # the check and the write as one step: another importer may add the same ids
+                _apply_one(lib, report, on_conflict, id_, example, meta, npz)
             progress(i + 1, len(checked.ids), "importing")
     return report
+
+
+def _apply_one(lib, report: ImportReport, on_conflict: str, id_: str, example, meta: bytes, npz: bytes) -> None:
+    if id_ not in lib:
+        lib.put_encoded(example, meta, npz)
+        report.added.append(id_)
+    elif on_conflict == "skip":
+        report.skipped.append(id_)
+    elif on_conflict == "replace":
+        lib.put_encoded(example, meta, npz, replace=True)
+        report.replaced.append(id_)
+    else:
+        renamed = dataclasses.replace(example, id=lib.new_id(id_))
+        lib.put_encoded(renamed, *encode(renamed, json.loads(meta)["created"]))
+        report.renamed[id_] = renamed.id
 
 
 def import_archive(archive: str | os.PathLike, library: str | os.PathLike, *, on_conflict: str = "skip",

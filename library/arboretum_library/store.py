@@ -23,6 +23,7 @@ import json
 import os
 import shutil
 import sqlite3
+import threading
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import replace as with_fields
 from pathlib import Path
@@ -79,7 +80,7 @@ class Library:
         self._con: sqlite3.Connection | None = None
         self._ident: tuple[int, int] | None = None
         self._broken = False
-        self._held = False
+        self._held: int | None = None  # the thread holding the write lock (re-entrant for it only)
         self.readonly = readonly
         self.durable = durable
         self.lock_timeout = lock_timeout
@@ -324,7 +325,7 @@ class Library:
         """Hold the library's write lock (waiting at most ``lock_timeout``, else ``LibraryBusy``); then
         reconnect if the catalog was replaced or damaged and finish any crashed write found in ``.tmp/``.
         Re-entrant: inside a held lock (``add_new`` calling ``add``) it just goes on."""
-        if self._held:
+        if self._held == threading.get_ident():
             yield
             return
         with open(self.root / ".lock", "a+b") as f:
@@ -333,7 +334,7 @@ class Library:
             if not wait_for_lock(f.fileno(), self.lock_timeout, on_wait):
                 raise LibraryBusy(f"the library {self.root} is being written by another process "
                                   f"(waited {self.lock_timeout:g} s); try again")
-            self._held = True
+            self._held = threading.get_ident()
             try:
                 if finish_crashed:
                     self._sync(locked=True)
@@ -343,7 +344,7 @@ class Library:
             except sqlite3.DatabaseError as exc:
                 raise self._damaged(exc) from None
             finally:
-                self._held = False
+                self._held = None
                 fcntl.flock(f.fileno(), fcntl.LOCK_UN)
 
     # -- the catalog connection --------------------------------------------------------------
