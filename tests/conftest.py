@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,13 @@ from arboretum_library.assets import assets_dir
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_SCANS = REPO.parent / "shared" / "data" / "scans"
+
+# Run under nohup or '&' in a script, the tests inherit SIGINT ignored, and so does every command they
+# start (an ignored signal stays ignored across exec): the Ctrl-C tests then see their command finish
+# or hang instead of stopping (3 failed so). A handler is reset to the default on exec, so children
+# start with Ctrl-C working again.
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture(autouse=True)
