@@ -54,6 +54,19 @@ def test_the_root_stays_on_the_trunk_of_a_crown_bent_to_the_ground(elm, amount):
     assert len(d.hbl.lobes) == 20
 
 
+@pytest.mark.parametrize("seed", range(1, 7))
+def test_the_root_stays_on_the_trunk_whatever_points_the_downsampling_keeps(elm, seed):
+    # the first rule asked the largest cluster to be wider than a trunk: right for 4 of 12 seeds only,
+    # since the mats often break into narrower pieces (a reviewer's case; 5 put the root on a mat
+    # 0.5 of the height away, 3 refused the tree)
+    from arboretum_server.decompose.preprocess import prepare
+
+    pts, base, h = elm
+    opts = DecomposeOptions(n_main=6, n_lobes=20, seed=seed)
+    prep = prepare(bend(pts, base, h, 0.9), opts, np.random.default_rng(seed))
+    assert np.linalg.norm(prep.root_scan - base) < 0.01 * h
+
+
 def test_two_bent_crowns_are_still_two_trees(elm):
     # their 12,000 points leave no big cluster in the band (each trunk holds 10 points there, the leaves
     # 27 at most), so the largest cluster was all of it: "no trunk base found (spreads 7.31 wide)"

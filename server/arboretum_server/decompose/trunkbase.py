@@ -87,13 +87,8 @@ def _base_clusters(base: np.ndarray, h: float, cloud: np.ndarray) -> tuple[np.nd
         dense = sizes[big] / np.maximum(base[:, 2].max() - low, 1e-9 * h)
         hanging = (low > low.min() + STANDING * h) & (dense < HANGING_SHARE * dense[0])
         column = _no_column(cloud, [base[lab == c] for c in big], h)
-        # the lowest never hangs this way (an occluded trunk beside a bush is gappy and wide; weeping
-        # leaves may outnumber a thin trunk in the band), unless a larger cluster with a trunk column
-        # stands as low (within STANDING): leaves touching down beside the trunk, a hair lower
-        lowest = int(np.argmin(low))
-        if not ((low <= low[lowest] + STANDING * h) & ~column & (sizes[big] > sizes[big[lowest]])).any():
-            column[lowest] = False
-        hanging |= column
+        column[np.argmin(low)] = False  # the lowest never hangs this way (an occluded trunk beside a bush
+        hanging |= column  # is gappy and wide; weeping leaves may outnumber a thin trunk in the band)
         big = big[~hanging]
     if len(big) >= 2:
         cents = np.array([np.median(base[lab == c], axis=0) for c in big])
@@ -143,18 +138,17 @@ def _trunks_under_fallen_crown(base: np.ndarray, lab: np.ndarray, big: np.ndarra
     """The clusters of the base band that are trunks when its largest is a crown bent down to the
     ground, or when it has no big cluster (largest first); None when neither holds.
 
-    The largest is such a crown when it is wider than a trunk (``_flat``'s width), and it and every
-    other big cluster that is no trunk is a mat (flatter than half its plan radius: stems in the band
-    span its height) with the crown rising above it (each slab of its ``columns.column`` holds
-    ``columns.MIN_SLAB`` points; ground has nothing above it). A trunk is a cluster of at least
+    The largest is such a crown when it is no trunk column but a mat, and so is every other big
+    cluster that is no trunk: flatter than half its plan radius (stems in the band span its height),
+    with the crown rising above it (each slab of its ``columns.column`` holds ``columns.MIN_SLAB``
+    points; ground has nothing above it). (Asking the largest to be wider than a trunk held for 4 of
+    12 downsampling seeds only: the mats often break into narrower pieces.) A trunk is a cluster of at least
     ``BASE_MIN`` points whose column is full (no slab under ``GAPPY`` of the fullest, none under
     ``MIN_SLAB``) and narrow (``columns.NARROW``). A weeping crown's leaves can outnumber a thin trunk
     in the band, and the root then went to them (the guiding elm bent down 90 %: 0.49 of the height
     from its trunk)."""
     from .columns import MIN_SLAB, NARROW
 
-    if len(big) and plan_radius(base[lab == big[0]], 90) <= 0.5 * MAX_BASE_SPREAD * h:
-        return None
     sizes = np.bincount(lab)
     cands = np.flatnonzero(sizes >= BASE_MIN)
     if not len(cands):
@@ -165,6 +159,9 @@ def _trunks_under_fallen_crown(base: np.ndarray, lab: np.ndarray, big: np.ndarra
                       for core, ring in cols], bool)
     mat = np.array([core.min() >= MIN_SLAB and np.ptp(base[lab == c, 2]) < 0.5 * plan_radius(base[lab == c], 90)
                     for c, (core, _) in zip(cands, cols)], bool)
+    first = np.flatnonzero(cands == big[0])[0] if len(big) else None
+    if first is not None and (trunk[first] or not mat[first]):
+        return None  # the largest is a trunk, or no mat: the other rules decide
     others = np.isin(cands, big) & ~trunk
     if not trunk.any() or not mat[others].all():
         return None
