@@ -65,6 +65,11 @@ def test_yaml_script_builds_the_session(tmp_path, lib, capsys):
     ("- add: {example: nope}", "operation 1 (add): no example 'nope'"),
     ("add: 3", "expected a list of one-key maps"),
     ("- [unclosed", "not valid YAML"),
+    # an export takes grow's limits (density 1000 wrote 258 MB; a negative seed was a traceback)
+    ("- add: {example: ex-0}\n- export: {out: t.glb, options: {density: 1000}}",
+     "operation 2 (export): growth option density must be a number > 0 and <= 20, got 1000"),
+    ("- add: {example: ex-0}\n- export: {out: t.glb, seed: -3}", "operation 2 (export): seed must not be negative"),
+    ("- add: {example: ex-0}\n- export: {out: t.glb, lod: 99}", "operation 2 (export): --lod must be 0"),
 ])
 def test_script_mistakes_are_one_line_errors(tmp_path, lib, capsys, text, message):
     script = tmp_path / "bad.yaml"

@@ -119,6 +119,10 @@ def test_a_crown_that_cannot_be_read_is_named_as_the_crown(tmp_path, capsys):
     (["grow", "IN", "--out", "g.glb", "--step", "1e-6"], "--step 1e-06 m is too fine for these lobes"),
     (["grow", "IN", "--out", "g.glb", "--step", "100"], "--step 100 m is larger than every lobe"),
     (["synth", "--out", "s.ply", "--noise", "nan"], "--noise must be a number >= 0 and <= 1"),
+    # a reviewer's cases: 18.7 GB in 60 s, and minutes of scanning
+    (["synth", "--out", "s.ply", "--nodes", "100000000"], "--nodes: must be 500..2,000,000"),
+    (["synth", "--out", "s.ply", "--scanners", "100000"], "--scanners: must be 1..64"),
+    (["synth", "--out", "s.ply", "--points", "100000000"], "--points: at most 5,000,000"),
     (["synth", "--out", "s.ply", "--noise", "-0.1"], "--noise must be"),
     (["synth", "--out", "s.ply", "--points", "1"], "--points: must be >= 200"),
 ])

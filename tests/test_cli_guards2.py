@@ -81,6 +81,7 @@ def test_decimal_commas_are_refused_not_misread(tmp_path, row):
     ("1.5, 2.5, 3.5\n4.5, 5.5, 6.5\n7, 8, 9.25\n", [1.5, 2.5, 3.5]),
     ("x,y,z\n1,2,3\n4,5,6\n7,8,10\n", [1, 2, 3]),
     ("x;y;z\n1.5;2;3\n4;5;6\n7;8;10\n", [1.5, 2, 3]),
+    ("x ,y ,z\n-625 ,265 ,516\n1 ,2 ,3\n4 ,5 ,6\n", [-625, 265, 516]),  # a space before each comma (a reviewer's)
 ])
 def test_comma_separated_files_still_read(tmp_path, text, first):
     (tmp_path / "s.csv").write_text(text)
@@ -289,6 +290,9 @@ def test_build_missing_scan_or_report_file_is_refused_up_front(tmp_path, cloud, 
     assert main(["library", "build", str(cloud), "--library", str(lib), "--report", str(tmp_path / "rep")]) == 2
     assert "--report" in _err_line(capsys) and not lib.exists()
     assert (tmp_path / "rep").read_text() == "mine"
+    # a report inside the library: a build that stored nothing removed both (a reviewer's case)
+    assert main(["library", "build", str(cloud), "--library", str(lib), "--report", str(lib / "report")]) == 2
+    assert "is inside --library" in _err_line(capsys) and not lib.exists()
 
 
 def test_build_leaves_out_cylinder_tables(tmp_path):
@@ -297,8 +301,10 @@ def test_build_leaves_out_cylinder_tables(tmp_path):
     (tmp_path / "a.xyz").write_text("0 0 0\n1 1 1\n0 1 2\n")
     (tmp_path / "QSM.csv").write_text(QSM_HEADER + "0,0,0,0,0,1,1,0.1,0,2,1\n")
     ignored: list = []
+    (tmp_path / "README.txt").write_text("Scans of the park.\nSee the licence.\n")  # short prose (a reviewer's)
     assert expand_scans([str(tmp_path)], ignored) == [str(tmp_path / "a.xyz")]
-    assert [(Path(p).name, "cylinder table" in why) for p, why in ignored] == [("QSM.csv", True)]
+    assert sorted((Path(p).name, "cylinder table" in why) for p, why in ignored) == [("QSM.csv", True),
+                                                                                    ("README.txt", False)]
     with pytest.raises(InputError, match=r"no scans given: .*QSM.csv is a cylinder table"):
         expand_scans([str(tmp_path / "QSM.csv")])
 

@@ -179,7 +179,8 @@ def sniff_not_points(path: Path, limit: int = 65536) -> str | None:
         return None
     try:
         with open(path, "rb") as f:
-            lines = f.read(limit).removeprefix(b"\xef\xbb\xbf").splitlines()
+            data = f.read(limit)
+        lines = data.removeprefix(b"\xef\xbb\xbf").splitlines()
     except OSError:
         return None
     names = None
@@ -190,7 +191,10 @@ def sniff_not_points(path: Path, limit: int = 65536) -> str | None:
         if all(_is_number(t) for t in re.split(rb"[,;\s]+", s) if t):
             return not_points_reason(names)
         names = _header_names(s)
-    if len(lines) > MAX_HEADER_LINES:  # read_text refuses it too
+    # read_text refuses it too; a short .txt of prose (a README beside the scans) is no scan either,
+    # while a short broken .xyz stays a scan that fails, so its user hears of it
+    short_prose = path.suffix.lower() == ".txt" and 0 < len(data) < limit and any(re.search(rb"[A-Za-z]{3,}", ln) for ln in lines)
+    if len(lines) > MAX_HEADER_LINES or short_prose:
         return f"holds text without numbers in its first {MAX_HEADER_LINES} lines (e.g. a licence), not a point cloud"
     return None
 
@@ -223,7 +227,7 @@ def parse_table(path: Path, lines: list[bytes], first_line: int) -> np.ndarray:
     return table
 
 
-DECIMAL_COMMA = re.compile(rb"[-+]?\d*,\d+(?:[eE][-+]?\d+)?")
+DECIMAL_COMMA = re.compile(rb"[-+]?\d+,\d+(?:[eE][-+]?\d+)?")
 """A number written with a decimal comma, e.g. ``-1,234`` or ``5,6e-3``."""
 ROWS_CHECKED = 20
 """Data rows ``_refuse_decimal_commas`` looks at."""

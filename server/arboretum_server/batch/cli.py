@@ -55,6 +55,8 @@ def check_args(args: argparse.Namespace) -> str:
     lib = Path(args.library)
     if lib.exists() and not lib.is_dir():
         raise InputError(f"--library {lib}: is a file, not a library folder")
+    if Path(folder).resolve().is_relative_to(lib.resolve()):  # a build that stores nothing removes the library
+        raise InputError(f"--report {folder}: is inside --library {lib}; keep the report beside the library")
     return folder
 
 

@@ -17,7 +17,7 @@ from arboretum_library.model import HBL
 from arboretum_server.service.context import Context
 from arboretum_server.service.jobs import Job
 
-from .grow import grow_options, session_hbl
+from .grow import checked_growth, grow_options
 
 FORMATS = ("glb", "obj", "ply")
 
@@ -49,11 +49,8 @@ def export_mesh_job(progress, hbl: HBL, format: str, seed: int, lod: int, option
 def export_mesh(ctx: Context, req: P.ExportMesh) -> Job:
     if req.format not in FORMATS:
         raise InputError(f"export format {req.format!r}: use one of {', '.join(FORMATS)}")
-    if req.lod < 0:
-        raise InputError("export lod must be >= 0")
-    grow_options(req.options)
-    kwargs = {"hbl": session_hbl(ctx, req.session), "format": req.format, "seed": req.seed, "lod": req.lod,
-              "options": req.options}
+    kwargs = {"hbl": checked_growth(ctx, req.session, req.seed, req.options, req.lod), "format": req.format,
+              "seed": req.seed, "lod": req.lod, "options": req.options}
     return Job(f"{__name__}:export_mesh_job", kwargs, lambda r: P.ExportFile(**r))
 
 

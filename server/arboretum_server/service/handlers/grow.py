@@ -31,6 +31,29 @@ def grow_options(options: dict):
         raise InputError(f"growth options: {exc}") from None
 
 
+def checked_growth(ctx: Context, session_id: str, seed: int, options: dict, lod: int = 0) -> HBL:
+    """The session's assembled HBL once ``seed``, ``lod`` and the growth ``options`` are ones a worker
+    can grow without exhausting memory (the same limits as ``arboretum grow``: an assemble script's
+    export with density 1000 wrote 258 MB, and a negative seed was an internal error)."""
+    from arboretum_server.grow.cli import (
+        MAX_DENSITY,
+        MAX_LEAF_DENSITY,
+        check_lod,
+        check_number,
+        check_seed,
+        check_size,
+    )
+
+    check_seed(seed, "seed")
+    check_lod(lod)
+    opts = grow_options(options)
+    check_number(opts.density, "growth option density", 0.0, MAX_DENSITY, lo_open=True)
+    check_number(opts.leaf_density, "growth option leaf_density", 0.0, MAX_LEAF_DENSITY)
+    hbl = session_hbl(ctx, session_id)
+    check_size(hbl.lobes, opts)
+    return hbl
+
+
 def grow_job(progress, hbl: HBL, seed: int, options: dict) -> dict:
     """Worker: grow ``hbl``; the tree's arrays."""
     from arboretum_server.grow.tree import grow_tree
@@ -46,8 +69,8 @@ def session_hbl(ctx: Context, session_id: str) -> HBL:
 
 
 def grow(ctx: Context, req: P.Grow) -> Job:
-    grow_options(req.options)
-    kwargs = {"hbl": session_hbl(ctx, req.session), "seed": req.seed, "options": req.options}
+    kwargs = {"hbl": checked_growth(ctx, req.session, req.seed, req.options), "seed": req.seed,
+              "options": req.options}
     return Job(f"{__name__}:grow_job", kwargs, lambda r: P.GrownTree(**r))
 
 
