@@ -56,7 +56,7 @@ class Message:
     arrays: Mapping[str, np.ndarray] = field(default_factory=dict)
     client: str = ""
     """The sender's client token ("" if none): a server keys replies and jobs by it, so a client can
-    retry on a new socket; without one, by the socket."""
+    retry on a new socket; clients without one share one origin."""
 
 
 MAX_CLIENT_TOKEN = 64

@@ -34,7 +34,7 @@ log = logging.getLogger("arboretum.server")
 Route = tuple[bytes, ...]
 """Routing frames of a peer: (identity,) for DEALER, (identity, b"") for REQ."""
 Key = tuple[Any, int, str]
-"""(client token or peer identity, request id, request type)."""
+"""(client token, "" for clients without one, request id, request type)."""
 
 REPEATABLE = frozenset({"ping", "hello", "cancel", "library.list", "library.search", "library.get", "session.list",
                         "session.get", "session.hbl", "refine.points", "assembly.recognize"})
@@ -222,7 +222,7 @@ class Server:
         try:
             # without a token, clients share one id space, as in protocol 1 before tokens: a retry on
             # a new socket (lazy pirate) must find its reply (use random 63-bit ids, as Remote does)
-            self._on_request(route, (client or b"", rid, req.TYPE), req)
+            self._on_request(route, (client, rid, req.TYPE), req)
         except Exception as exc:  # never let one request take the loop down
             self._send(route, rid, error_reply(exc, req.TYPE))
 
