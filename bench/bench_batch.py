@@ -29,7 +29,6 @@ def _single_scan_seconds(paths: list[Path], lib_path: Path) -> tuple[float, floa
     """Mean seconds of one scan into a library on its own, as ``arboretum decompose --library`` does
     (decompose, then each example added with the library's default durable writes); and of the
     decomposition alone."""
-    from dataclasses import replace
 
     from arboretum_library.store import Library
     from arboretum_server.batch.build import species_for
@@ -43,8 +42,7 @@ def _single_scan_seconds(paths: list[Path], lib_path: Path) -> tuple[float, floa
             out = decompose_scan(str(p), "", {"species": species_for(str(p), None), "points": POINTS})
             t1 = time.perf_counter()
             assert not out.error, out.error
-            for ex in out.examples:
-                lib.add(replace(ex, id=lib.new_id(p.stem)))
+            lib.add_new(out.examples, p.stem)  # as the build stores them
             whole.append(time.perf_counter() - t0)
             alone.append(t1 - t0)
     return sum(whole) / len(whole), sum(alone) / len(alone)

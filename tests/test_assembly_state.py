@@ -73,7 +73,7 @@ def test_snapshot_then_journal(tmp_path, monkeypatch):
 
 def test_a_snapshot_that_never_finished_loses_nothing(tmp_path, monkeypatch):
     monkeypatch.setattr(state, "SNAPSHOT_EVERY", 3)
-    def fail(*a):
+    def fail(*a, **k):
         raise OSError("disk full")  # or killed while writing it
 
     monkeypatch.setattr(state, "save_record", fail)

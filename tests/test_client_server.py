@@ -142,6 +142,26 @@ def test_cli_starts_an_embedded_server_and_runs_a_script(server, tmp_path):
     assert (tmp_path / "tree.glb").read_bytes()[:4] == b"glTF" and (tmp_path / "shot.png").stat().st_size > 1000
 
 
+def test_the_embedded_servers_own_state_folder_lives_until_stop(tmp_path, monkeypatch):
+    # without --state the autosaves go to a temporary folder: there while the server runs (its lock
+    # file in it), gone after stop; a folder the caller gave is left alone
+    import tempfile
+
+    from arboretum_client.embedded import start_server
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    srv = start_server()
+    try:
+        assert srv.scratch is not None and srv.scratch.parent == tmp_path and (srv.scratch / ".lock").exists()
+    finally:
+        srv.stop()
+    assert srv.scratch is None and list(tmp_path.glob("arboretum-client-state-*")) == []
+    mine = tmp_path / "mine"
+    srv = start_server(state=mine)
+    srv.stop()
+    assert srv.scratch is None and (mine / ".lock").exists()
+
+
 def test_cli_headless_without_a_script_is_one_clear_error():
     import subprocess
     import sys

@@ -42,7 +42,7 @@ def _line(points: np.ndarray, color, width: float = 3.0) -> Polyline | None:
 
 def _preview(state: ClientState, drag: Drag) -> list:
     """Lines of the dragged placement or lobe where the drag would put it; none where that is out of
-    the model's range (a scale beyond 1e3, say: the server refuses such an edit too)."""
+    the model's range (a scale beyond 1e6, say: the server refuses such an edit too)."""
     try:
         return _preview_lines(state, drag)
     except ValidationError:

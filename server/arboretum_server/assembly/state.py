@@ -172,7 +172,7 @@ class Autosave:
         self._writer.start()
 
     def _save(self, snap: Snapshot) -> None:
-        save_record(self.snapshot_path, snap, **({"fsync": True} if self.fsync else {}))
+        save_record(self.snapshot_path, snap, fsync=self.fsync)
 
     def _retire_journal(self) -> None:
         """Move the journal's entries into ``ID.journal.old`` (renamed, or appended after an earlier

@@ -22,8 +22,9 @@ MAX_STEP_REFINE = 4.0
 """Smallest --step: the default step (1/6 of the median lobe radius) divided by this (64 times as many
 attraction points; at /5 a 40-lobe scan grew 608,181 twig nodes in 67 s and 2.8 GB)."""
 MAX_ELEMENTS = 1_500_000
-"""Largest estimated twig nodes + leaf cards (``estimate_size``): 110 times the default growth of a
-40-lobe scan, about 3-5 GB of memory (docs/growth.md, "Limits of the options")."""
+"""Largest estimated twig nodes + leaf cards (``estimate_size``): about 120 times the default growth
+of a 40-lobe scan, 3.3-6 GB of memory at the measured 2.2-4 KB each (docs/growth.md, "Limits of the
+options")."""
 BYTES_PER_ELEMENT = 3000
 """Peak memory per twig node or leaf card, growth through GLB (measured 2.2-4 KB), for the message."""
 LEAF_SHARE = 0.7
