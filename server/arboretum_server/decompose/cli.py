@@ -145,7 +145,7 @@ def _store(lib, dec, scan: str, options) -> tuple[list, list[str]]:
     if lib is None:
         return make_examples(dec.hbl, prov, counter_ids("example")), []
     stem = os.path.splitext(os.path.basename(scan))[0]
-    examples = lib.add_new(make_examples(dec.hbl, prov, counter_ids("new")), stem)
+    examples = lib.add_new(make_examples(dec.hbl, prov), stem)
     return examples, [e.id for e in examples]
 
 

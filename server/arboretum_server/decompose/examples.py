@@ -57,18 +57,14 @@ def provenance(source: str | Path, options: DecomposeOptions, sha256: str | None
     return Provenance(path.name, digest, options.species.lower(), options.as_dict())
 
 
-def make_examples(hbl: HBL, prov: Provenance, new_id: Callable[[], str],
-                  sink: Callable[[Example], object] | None = None) -> list[Example]:
-    """Examples of every main branch of ``hbl`` with descriptors and tags; ids from ``new_id()``.
-
-    ``sink`` (e.g. ``Library.add``) receives each example before the next id is drawn.
-    """
+def make_examples(hbl: HBL, prov: Provenance, new_id: Callable[[], str] | None = None) -> list[Example]:
+    """Examples of every main branch of ``hbl`` with descriptors and tags; ids from ``new_id()``
+    (default ``example-NNNN``; ``Library.add_new`` gives them library ids when it stores them)."""
+    new_id = new_id or counter_ids("example")
     out = []
     for s in split_structures(hbl):
         d = describe(s)
         out.append(Example(new_id(), s, prov, d, tags_for(d)))
-        if sink is not None:
-            sink(out[-1])
     return out
 
 

@@ -155,7 +155,7 @@ def commit(ctx: Context, req: P.RefineCommit):
         lib = ctx.library()
         prov = Provenance(d.name, "", dec.options.species, dec.options.as_dict())
         stem = "".join(c if c.isalnum() or c in "-_" else "-" for c in d.name)[:60] or "scan"
-        examples = lib.add_new(make_examples(dec.hbl, prov, lambda: "new"), stem)  # ids picked under the lock
+        examples = lib.add_new(make_examples(dec.hbl, prov), stem)  # ids picked under the lock
         return P.LibraryImported(ids=tuple(e.id for e in examples), stats={"lobes": len(dec.lobes)}, notes=said)
 
     return _with_draft(ctx, req.session, then)
