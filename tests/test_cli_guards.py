@@ -157,7 +157,7 @@ def test_the_size_estimate_bounds_what_grows(hbl_file):
     """``estimate_size`` is an upper estimate of the twig nodes, and follows the leaf density."""
     from arboretum_library.codec import load_record
     from arboretum_library.model import HBL
-    from arboretum_server.grow.cli import LEAF_SHARE, estimate_size
+    from arboretum_server.grow.limits import LEAF_SHARE, estimate_size
     from arboretum_server.grow.options import GrowOptions
     from arboretum_server.grow.tree import grow_tree
 

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from arboretum_library.assets import asset_path
+from arboretum_library.checks import check_seed
 from arboretum_library.cli import add_json_flag, emit
 from arboretum_library.errors import ArboretumError, InputError
 
@@ -214,8 +215,7 @@ def prepare_out(out: Path) -> bool:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.seed < 0:
-        raise InputError(f"--seed must not be negative, got {args.seed}")
+    check_seed(args.seed)
     out = Path(args.out).resolve()
     if prepare_out(out):
         print(f"{out} holds a previous demo: replacing it (its library included)", file=sys.stderr, flush=True)

@@ -113,6 +113,7 @@ def check_convert(args: argparse.Namespace) -> None:
     import math
     from pathlib import Path
 
+    from arboretum_library.checks import check_seed
     from arboretum_library.errors import InputError
     from arboretum_library.outputs import check_output
     from arboretum_library.pointio import WRITERS
@@ -123,8 +124,7 @@ def check_convert(args: argparse.Namespace) -> None:
                          f"to {MAX_HEIGHT:g} metres")
     if args.max_points is not None and args.max_points < 2:
         raise InputError(f"--max-points must be at least 2, got {args.max_points}")
-    if args.seed < 0:
-        raise InputError(f"--seed must not be negative, got {args.seed}")
+    check_seed(args.seed)
     suffix = Path(args.output).suffix
     if suffix.lower() not in WRITERS:
         raise InputError(f"OUT '{args.output}': cannot write format '{suffix}' (writable: {' '.join(sorted(WRITERS))})")

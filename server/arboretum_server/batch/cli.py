@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 
+from arboretum_library.checks import check_seed
 from arboretum_library.cli import add_json_flag, emit
 
 
@@ -46,8 +47,7 @@ def check_args(args: argparse.Namespace) -> str:
 
     if args.points < 0 or not (math.isfinite(args.height) and args.height > 0):
         raise InputError("--points must not be negative and --height must be a finite number > 0")
-    if args.seed < 0:
-        raise InputError(f"--seed must not be negative, got {args.seed}")
+    check_seed(args.seed)
     check_points(DecomposeOptions(points=args.points), "--points")
     folder = args.report or f"{str(Path(args.library)).rstrip('/')}-report"
     if Path(folder).exists() and not Path(folder).is_dir():

@@ -15,6 +15,7 @@ import sys
 import time
 from contextlib import contextmanager
 
+from arboretum_library.checks import check_seed
 from arboretum_library.cli import add_json_flag, emit
 
 UP_CHOICES = ("auto", "z", "y")
@@ -52,8 +53,7 @@ def _options(args: argparse.Namespace):
             raise InputError(f"--{name} must be at least 1, got {v}")
     if args.points < 0 or not (math.isfinite(args.height) and args.height >= 0):
         raise InputError("--points must not be negative and --height must be a finite number >= 0")
-    if args.seed < 0:
-        raise InputError(f"--seed must not be negative, got {args.seed}")
+    check_seed(args.seed)
     if args.reach_weight is not None and not 0.0 <= args.reach_weight <= 1.0:
         raise InputError(f"--reach-weight must lie in 0..1, got {args.reach_weight}")
     options = DecomposeOptions(

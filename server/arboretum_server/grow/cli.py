@@ -7,28 +7,15 @@ import math
 import sys
 from pathlib import Path
 
+from arboretum_library.checks import check_input_file, check_number, check_seed
 from arboretum_library.cli import add_json_flag, emit
 from arboretum_library.errors import InputError
 from arboretum_library.outputs import check_output
 
+from .limits import MAX_DENSITY, MAX_LEAF_DENSITY, check_size, check_step
+
 MESH_FORMATS = (".glb", ".obj", ".ply")
 SKELETON_FORMATS = (".json", ".ply")
-MAX_DENSITY = 20.0
-"""Largest --density: ten times the densest setting we use (2.1 in the bench). Memory and time grow
-about linearly with it (docs/growth.md: about 0.7 GB and 5 s at 20 on a 40-lobe scan)."""
-MAX_LEAF_DENSITY = 20.0
-"""Largest --leaf-density (leaf cards per tip node, default 1): about 0.4 GB at 20 on a 40-lobe scan."""
-MAX_STEP_REFINE = 4.0
-"""Smallest --step: the default step (1/6 of the median lobe radius) divided by this (64 times as many
-attraction points; at /5 a 40-lobe scan grew 608,181 twig nodes in 67 s and 2.8 GB)."""
-MAX_ELEMENTS = 1_500_000
-"""Largest estimated twig nodes + leaf cards (``estimate_size``): about 120 times the default growth
-of a 40-lobe scan, 3.3-6 GB of memory at the measured 2.2-4 KB each (docs/growth.md, "Limits of the
-options")."""
-BYTES_PER_ELEMENT = 3000
-"""Peak memory per twig node or leaf card, growth through GLB (measured 2.2-4 KB), for the message."""
-LEAF_SHARE = 0.7
-"""Share of twig nodes that bear leaves, an upper estimate (measured 0.50-0.67)."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -61,46 +48,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def check_seed(seed: int, what: str = "--seed") -> None:
-    """``InputError`` unless ``seed`` is a non-negative integer (what numpy's generators take)."""
-    if seed < 0:
-        raise InputError(f"{what} must not be negative, got {seed}")
-
-
-def check_input_file(path: str, what: str) -> Path:
-    """``path`` as a Path when it names an existing file; ``InputError`` naming ``what`` otherwise."""
-    p = Path(path)
-    if p.is_dir():
-        raise InputError(f"{what} {p}: is a folder, not a file")
-    if not p.is_file():
-        raise InputError(f"{what} {p}: no such file")
-    return p
-
-
-def check_lod(level: int, sides: int | None = None) -> None:
-    """``InputError`` unless ``--lod level`` (and ``--sides sides``) are ones the mesher takes."""
-    from arboretum_server.mesh.lod import MAX_LEVEL, SIDES_RANGE
-
-    if not 0 <= level <= MAX_LEVEL:
-        raise InputError(f"--lod must be 0 (full detail) to {MAX_LEVEL} (coarsest), got {level}")
-    lo, hi = SIDES_RANGE
-    if sides is not None and not lo <= sides <= hi:
-        raise InputError(f"--sides must be {lo} to {hi}, got {sides}")
-
-
-def check_number(value: float | None, what: str, lo: float, hi: float, lo_open: bool = False) -> None:
-    """``InputError`` unless ``value`` (None: the default) is a finite number in [lo, hi] ((lo, hi]
-    when ``lo_open``)."""
-    if value is None:
-        return
-    low_ok = value > lo if lo_open else value >= lo
-    if not (math.isfinite(value) and low_ok and value <= hi):
-        low = f"> {lo:g}" if lo_open else f">= {lo:g}"
-        raise InputError(f"{what} must be a number {low} and <= {hi:g}, got {value}")
-
-
 def _check_args(args: argparse.Namespace) -> tuple[Path, Path | None]:
     """Every argument checked before any work: the output paths, then the numbers."""
+    from arboretum_server.mesh.lod import check_lod
+
     check_input_file(args.hbl, "HBL_OR_ASSEMBLY")
     out = Path(args.out)
     if out.suffix.lower() not in MESH_FORMATS:
@@ -118,60 +69,6 @@ def _check_args(args: argparse.Namespace) -> tuple[Path, Path | None]:
     check_number(args.step, "--step", 0.0, math.inf, lo_open=True)
     check_number(args.leaf_size, "--leaf-size", 0.0, math.inf, lo_open=True)
     return out, skel
-
-
-def check_step(step: float | None, lobes) -> str | None:
-    """``InputError`` when ``--step`` is finer than the default step (1/6 of the median lobe radius)
-    over ``MAX_STEP_REFINE``, or larger than every lobe; a note (str) when it exceeds the median lobe
-    radius (most lobes then grow nothing); None otherwise."""
-    from .attraction import default_step, equivalent_radius
-
-    if step is None or not lobes:
-        return None
-    d0 = default_step(lobes)
-    radii = [equivalent_radius(lb) for lb in lobes]
-    if step < d0 / MAX_STEP_REFINE:
-        raise InputError(f"--step {step:g} m is too fine for these lobes: the smallest is "
-                         f"{d0 / MAX_STEP_REFINE:.3g} m (the default {d0:.3g} m / {MAX_STEP_REFINE:g})")
-    if step > max(radii):
-        raise InputError(f"--step {step:g} m is larger than every lobe (the largest has radius "
-                         f"{max(radii):.3g} m): no twig would grow; the default is {d0:.3g} m")
-    if step > 6 * d0:
-        return (f"note: --step {step:g} m is larger than half the lobes (median radius {6 * d0:.3g} m); "
-                "few twigs will grow")
-    return None
-
-
-def estimate_size(lobes, opts) -> tuple[int, int]:
-    """(twig nodes, leaf cards) a growth with ``opts`` will make at most, about: one twig node per
-    attraction point (``attraction.attraction_points``' count; measured 0.5-1.1), ``LEAF_SHARE`` of
-    them bearing ``leaf_density`` cards."""
-    import numpy as np
-
-    from .attraction import default_step
-    from .hulls import mesh_volume
-
-    if not lobes:
-        return 0, 0
-    step = opts.step if opts.step is not None else default_step(lobes)
-    hull = np.array([len(lb.hull_vertices) for lb in lobes], np.float64)
-    volume = np.array([mesh_volume(lb.hull_vertices, lb.hull_faces) for lb in lobes])
-    mult = np.array([opts.lobe_multiplier(i) for i in range(len(lobes))])
-    cap = np.maximum(opts.max_points_per_lobe - hull, 0)
-    interior = np.minimum(np.round(opts.attraction_density * mult * volume / step**3), cap)
-    nodes = int((interior + hull)[mult > 0].sum())
-    return nodes, int(LEAF_SHARE * opts.leaf_density * nodes)
-
-
-def check_size(lobes, opts) -> None:
-    """``InputError`` naming the estimate when the tree would exceed ``MAX_ELEMENTS``."""
-    nodes, leaves = estimate_size(lobes, opts)
-    if nodes + leaves > MAX_ELEMENTS:
-        gb = (nodes + leaves) * BYTES_PER_ELEMENT / 1e9
-        raise InputError(f"--density {opts.density:g}, --leaf-density {opts.leaf_density:g} and --step "
-                         f"{opts.step if opts.step is not None else 'default'} would grow about {nodes:,} twig "
-                         f"nodes and {leaves:,} leaf cards (about {gb:.0f} GB of memory), over the limit of "
-                         f"{MAX_ELEMENTS:,} together; lower --density or --leaf-density, or raise --step")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from arboretum_library.errors import InputError
 from arboretum_server.grow.skeleton import Leaves
 
 from .chains import Chains
@@ -84,3 +85,12 @@ def cluster_leaves(leaves: Leaves, cell: float) -> Leaves:
 
 def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-12)
+
+
+def check_lod(level: int, sides: int | None = None) -> None:
+    """``InputError`` unless ``--lod level`` (and ``--sides sides``) are ones the mesher takes."""
+    if not 0 <= level <= MAX_LEVEL:
+        raise InputError(f"--lod must be 0 (full detail) to {MAX_LEVEL} (coarsest), got {level}")
+    lo, hi = SIDES_RANGE
+    if sides is not None and not lo <= sides <= hi:
+        raise InputError(f"--sides must be {lo} to {hi}, got {sides}")

@@ -87,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _check_args(args: argparse.Namespace) -> str:
     """The input, the output path and the numbers, checked before any work; the output's suffix."""
-    from arboretum_server.grow.cli import check_seed
+    from arboretum_library.checks import check_seed
 
     from .export import check_format
 

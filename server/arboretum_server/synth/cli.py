@@ -70,8 +70,9 @@ MAX_POINTS = 5_000_000
 
 def _check(args: argparse.Namespace) -> None:
     """Every argument checked before any work: numbers first, then the output paths."""
+    from arboretum_library.checks import check_number, check_seed
     from arboretum_library.pointio import WRITERS
-    from arboretum_server.grow.cli import check_lod, check_number, check_seed
+    from arboretum_server.mesh.lod import check_lod
 
     min_points = min_scan_points()
     if args.points < min_points:

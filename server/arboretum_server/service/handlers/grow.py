@@ -35,14 +35,9 @@ def checked_growth(ctx: Context, session_id: str, seed: int, options: dict, lod:
     """The session's assembled HBL once ``seed``, ``lod`` and the growth ``options`` are ones a worker
     can grow without exhausting memory (the same limits as ``arboretum grow``: an assemble script's
     export with density 1000 wrote 258 MB, and a negative seed was an internal error)."""
-    from arboretum_server.grow.cli import (
-        MAX_DENSITY,
-        MAX_LEAF_DENSITY,
-        check_lod,
-        check_number,
-        check_seed,
-        check_size,
-    )
+    from arboretum_library.checks import check_number, check_seed
+    from arboretum_server.grow.limits import MAX_DENSITY, MAX_LEAF_DENSITY, check_size
+    from arboretum_server.mesh.lod import check_lod
 
     check_seed(seed, "seed")
     check_lod(lod)

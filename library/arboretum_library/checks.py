@@ -1,0 +1,38 @@
+"""Checks of a command's arguments, made before any work: one ``InputError`` naming the option.
+
+Shared by the commands of the server and the client (``outputs.check_output`` checks output paths).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from .errors import InputError
+
+
+def check_seed(seed: int, what: str = "--seed") -> None:
+    """``InputError`` unless ``seed`` is a non-negative integer (what numpy's generators take)."""
+    if seed < 0:
+        raise InputError(f"{what} must not be negative, got {seed}")
+
+
+def check_input_file(path: str, what: str) -> Path:
+    """``path`` as a Path when it names an existing file; ``InputError`` naming ``what`` otherwise."""
+    p = Path(path)
+    if p.is_dir():
+        raise InputError(f"{what} {p}: is a folder, not a file")
+    if not p.is_file():
+        raise InputError(f"{what} {p}: no such file")
+    return p
+
+
+def check_number(value: float | None, what: str, lo: float, hi: float, lo_open: bool = False) -> None:
+    """``InputError`` unless ``value`` (None: the default) is a finite number in [lo, hi] ((lo, hi]
+    when ``lo_open``)."""
+    if value is None:
+        return
+    low_ok = value > lo if lo_open else value >= lo
+    if not (math.isfinite(value) and low_ok and value <= hi):
+        low = f"> {lo:g}" if lo_open else f">= {lo:g}"
+        raise InputError(f"{what} must be a number {low} and <= {hi:g}, got {value}")
