@@ -113,6 +113,18 @@ def make_hbl(rng: np.random.Generator, n_main: int = 3, n_lobes: int = 8, n_poin
     return _structure(rng, mains, n_lobes, n_points)
 
 
+def make_library(root, n: int, seed: int = 5, **example_kwargs):
+    """A library at ``root`` holding ``make_example``s ``ex-0`` .. ``ex-{n-1}`` (``n_lobes`` 3 unless
+    given); returns ``root``."""
+    from arboretum_library.store import Library
+
+    rng = np.random.default_rng(seed)
+    with Library.open(root, create=True) as lib:
+        for i in range(n):
+            lib.add(make_example(rng, id=f"ex-{i}", **{"n_lobes": 3, **example_kwargs}))
+    return root
+
+
 def assert_examples_equal(a: Example, b: Example) -> None:
     """Every field equal and every array equal bit for bit (same dtype, shape and bytes)."""
     meta_a, arrays_a = flatten(a)

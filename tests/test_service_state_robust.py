@@ -25,14 +25,13 @@ from arboretum_library.codec import (
 from arboretum_library.errors import InputError, ProtocolError, ValidationError
 from arboretum_library.geometry import make_transform
 from arboretum_library.model import Assembly, LobeTransform, MergeLink, Placement
-from arboretum_library.store import Library
 from arboretum_server.assembly import state
 from arboretum_server.assembly.state import Autosave, History
 from arboretum_server.service.context import Context
 from arboretum_server.service.dispatch import Dispatcher
 from arboretum_server.service.handlers import assembly as assembly_handlers
 from arboretum_server.service.sessions import Sessions
-from factories import make_example
+from factories import make_library
 
 
 def placed(*xs: float) -> Assembly:
@@ -46,11 +45,7 @@ def same(a: History, b: History) -> None:
 
 @pytest.fixture
 def server(tmp_path):
-    rng = np.random.default_rng(5)
-    with Library.open(tmp_path / "lib", create=True) as lib:
-        for i in range(2):
-            lib.add(make_example(rng, id=f"ex-{i}", n_lobes=3))
-    ctx = Context(Sessions(tmp_path / "state"), tmp_path / "lib")
+    ctx = Context(Sessions(tmp_path / "state"), make_library(tmp_path / "lib", 2))
     yield Dispatcher(ctx)
     ctx.close()
 

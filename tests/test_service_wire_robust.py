@@ -16,7 +16,6 @@ from arboretum_library import protocol as P
 from arboretum_library import protocol_base
 from arboretum_library.errors import ProtocolError
 from arboretum_library.remote import Remote
-from arboretum_library.store import Library
 from arboretum_library.wire import PROTOCOL_VERSION, Limits, Message, decode, encode
 from arboretum_server.service import socket as service_socket
 from arboretum_server.service.context import Context
@@ -24,7 +23,7 @@ from arboretum_server.service.dispatch import Dispatcher, load_handlers
 from arboretum_server.service.jobs import Job, JobRunner
 from arboretum_server.service.sessions import Sessions
 from arboretum_server.service.socket import Server
-from factories import make_example
+from factories import make_library
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -40,11 +39,7 @@ def counting_job(progress, path: str, seconds: float) -> dict:
 
 
 def start(tmp_path: Path, workers: int = 1, **kw) -> tuple[Server, threading.Thread]:
-    rng = np.random.default_rng(5)
-    with Library.open(tmp_path / "lib", create=True) as lib:
-        for i in range(2):
-            lib.add(make_example(rng, id=f"ex-{i}", n_lobes=3, n_points=2000))
-    ctx = Context(Sessions(tmp_path / "state"), tmp_path / "lib")
+    ctx = Context(Sessions(tmp_path / "state"), make_library(tmp_path / "lib", 2, n_points=2000))
     handlers = load_handlers()
     handlers[P.ExportMesh] = lambda ctx, req: Job(
         f"{__name__}:counting_job", {"path": str(tmp_path / f"runs-{req.format}"), "seconds": req.seed / 10},

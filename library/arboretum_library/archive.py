@@ -186,7 +186,7 @@ def apply_archive(lib, checked: CheckedArchive, on_conflict: str = "skip",
     with tf:
         for i, id_ in enumerate(checked.ids):
             example, meta, npz = _load(tf, by_name, checked.path, id_)
-            with lib._lock():  # the check and the write as one step: another importer may add the same ids
+            with lib.locked():  # the check and the write as one step: another importer may add the same ids
                 _apply_one(lib, report, on_conflict, id_, example, meta, npz)
             progress(i + 1, len(checked.ids), "importing")
     return report

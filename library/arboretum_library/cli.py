@@ -57,6 +57,11 @@ def _unavailable(name: str, why: str):
     return run
 
 
+def tell(message: str) -> None:
+    """One line for the user on stderr now (a wait, a repair), apart from the command's output."""
+    print(message, file=sys.stderr, flush=True)
+
+
 def add_json_flag(parser: argparse.ArgumentParser) -> None:
     """Give a subcommand the standard ``--json`` flag."""
     parser.add_argument("--json", action="store_true", help="print a machine-readable JSON summary")

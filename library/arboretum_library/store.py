@@ -78,7 +78,7 @@ class Library:
                  on_wait: Callable[[str], None] | None = None) -> None:
         self.root = root
         self._con: sqlite3.Connection | None = None
-        self._ident: tuple[int, int] | None = None
+        self._catalog_ident: tuple[int, int] | None = None
         self._broken = False
         self._held: int | None = None  # the thread holding the write lock (re-entrant for it only)
         self.readonly = readonly
@@ -320,6 +320,12 @@ class Library:
         if self.readonly:
             raise StoreError(f"library {self.root} was opened read-only")
 
+    def locked(self) -> contextlib.AbstractContextManager[None]:
+        """Hold the write lock over several steps (check, then write) that another writer must not
+        interleave; the store's own writes inside take it again (re-entrant for this thread)."""
+        self._writable()
+        return self._lock()
+
     @contextlib.contextmanager
     def _lock(self, finish_crashed: bool = True) -> Iterator[None]:
         """Hold the library's write lock (waiting at most ``lock_timeout``, else ``LibraryBusy``); then
@@ -362,11 +368,11 @@ class Library:
             ident = _ident(db)
         else:
             self._con = catalog.connect(db, readonly=self.readonly, durable=self.durable)
-        self._ident, self._broken = ident, False
+        self._catalog_ident, self._broken = ident, False
 
     def _sync(self, locked: bool = False) -> None:
         """Reconnect when another process replaced (rebuilt) the catalog file, or after damage."""
-        if self._broken or self._con is None or _ident(self.root / CATALOG) != self._ident:
+        if self._broken or self._con is None or _ident(self.root / CATALOG) != self._catalog_ident:
             self._connect(locked)
 
     def _read(self, query: Callable[[sqlite3.Connection], object]):

@@ -17,7 +17,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from arboretum_library.cli import add_json_flag, emit, register_extensions
+from arboretum_library.cli import add_json_flag, emit, register_extensions, tell
 
 
 def register(subparsers: Any) -> None:
@@ -59,12 +59,6 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _tell(message: str) -> None:
-    import sys
-
-    print(message, file=sys.stderr, flush=True)
-
-
 def _open(path: str, readonly: bool = True, create: bool = False):
     """The library at ``path``. Writers wait for another process writing it as long as it takes, saying
     so on stderr (Ctrl-C stops them). A reader finding the catalog missing or damaged rebuilds it from
@@ -74,17 +68,17 @@ def _open(path: str, readonly: bool = True, create: bool = False):
     from arboretum_library.store import CatalogDamaged, Library
 
     try:
-        lib = Library.open(path, create, readonly=readonly, lock_timeout=None, on_wait=_tell)
+        lib = Library.open(path, create, readonly=readonly, lock_timeout=None, on_wait=tell)
     except CatalogDamaged as exc:
         try:  # as a writer, which rebuilds it
-            lib = Library.open(path, lock_timeout=None, on_wait=_tell)
+            lib = Library.open(path, lock_timeout=None, on_wait=tell)
         except OSError as why:
             where = f": {why.filename}" if why.filename else ""
             raise StoreError(f"{exc}, but this process cannot write the library ({why.strerror or why}{where})") from None
     r = lib.recovered
     if r.catalog_problem:
         kept = f"; the damaged file is kept as {r.catalog_kept}" if r.catalog_kept else ""
-        _tell(f"the catalog {lib.root / 'catalog.sqlite'} {r.catalog_problem}: rebuilt it from the example "
+        tell(f"the catalog {lib.root / 'catalog.sqlite'} {r.catalog_problem}: rebuilt it from the example "
               f"folders ({len(lib)} examples{kept})")
     return lib
 

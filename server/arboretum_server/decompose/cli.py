@@ -11,12 +11,11 @@ import argparse
 import math
 import os
 import shutil
-import sys
 import time
 from contextlib import contextmanager
 
 from arboretum_library.checks import check_seed
-from arboretum_library.cli import add_json_flag, emit
+from arboretum_library.cli import add_json_flag, emit, tell
 
 UP_CHOICES = ("auto", "z", "y")
 
@@ -106,8 +105,7 @@ def _library(path: str | None):
     created = not os.path.exists(path)
     try:
         # a decomposition takes seconds: wait for another writer as long as it takes, saying so
-        with Library.open(path, create=True, lock_timeout=None,
-                          on_wait=lambda m: print(m, file=sys.stderr, flush=True)) as lib:
+        with Library.open(path, create=True, lock_timeout=None, on_wait=tell) as lib:
             yield lib
     except BaseException:
         if created:
