@@ -50,10 +50,7 @@ def _crown_mesh(path: str):
 
     p = Path(path)
     if p.suffix.lower() != ".ply":
-        try:
-            return load_mesh(p)
-        except InputError as exc:  # load_mesh names its input "module mesh"
-            raise InputError(str(exc).replace("module mesh", "--crown", 1)) from None
+        return load_mesh(p, "--crown")
     import trimesh
 
     try:

@@ -11,8 +11,9 @@ from arboretum_library.errors import InputError
 from arboretum_library.geometry import yup_to_zup
 
 
-def load_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (V, 3) float64 Z up and faces (F, 3) int32 of the mesh in ``path`` (.obj, .glb, .gltf).
+def load_mesh(path: str | Path, what: str = "module mesh") -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 3) float64 Z up and faces (F, 3) int32 of the mesh in ``path`` (.obj, .glb, .gltf);
+    errors name it as ``what`` (e.g. ``--crown``).
 
     OBJ is taken as Z up (as we write it); glTF is Y up and converted. Coincident vertices are merged.
     """
@@ -22,18 +23,18 @@ def load_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     suffix = path.suffix.lower()
     if suffix not in (".obj", ".glb", ".gltf"):
         raise InputError(
-            f"module mesh {path}: unsupported format {suffix!r} (use .obj, .glb or .gltf)"
+            f"{what} {path}: unsupported format {suffix!r} (use .obj, .glb or .gltf)"
         )
     if not path.is_file():
-        raise InputError(f"module mesh {path}: file not found")
+        raise InputError(f"{what} {path}: file not found")
     try:
         mesh = trimesh.load(path, force="mesh", process=True)
     except Exception as exc:  # trimesh raises many types on malformed files
-        raise InputError(f"module mesh {path}: cannot be read ({exc})") from exc
+        raise InputError(f"{what} {path}: cannot be read ({exc})") from exc
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     faces = np.asarray(mesh.faces, dtype=np.int32)
     if len(faces) == 0:
-        raise InputError(f"module mesh {path}: has no triangles")
+        raise InputError(f"{what} {path}: has no triangles")
     if suffix != ".obj":
         vertices = yup_to_zup(vertices)
     return vertices, faces
