@@ -77,7 +77,8 @@ def zones(pts: np.ndarray, groups: list[np.ndarray], sources: np.ndarray | None 
 
 def branch_paths(nodes: list[int], pred: np.ndarray, pts: np.ndarray, grid: BoxGrid, step: float) -> list[np.ndarray]:
     """Shortest paths root -> each node, resampled at ``step`` and centred in the cloud."""
-    raw = [resample_step(pts[path_to(pred, n)], step) for n in nodes]
+    tree = pred.tolist()
+    raw = [resample_step(pts[path_to(tree, n)], step) for n in nodes]
     return [resample_step(p, step) for p in centre_paths(raw, grid)]
 
 
