@@ -24,7 +24,7 @@ from arboretum_library.codec import (
 )
 from arboretum_library.errors import InputError, ProtocolError, ValidationError
 from arboretum_library.geometry import make_transform
-from arboretum_library.model import Assembly, LobeTransform, MergeLink, Placement
+from arboretum_library.model import Assembly, LobeTransform, Placement
 from arboretum_server.assembly import state
 from arboretum_server.assembly.state import Autosave, History
 from arboretum_server.service.context import Context
@@ -280,8 +280,9 @@ def test_session_load_refuses_huge_lobe_index_and_bad_links(server):
             P.parse(frames)
     far = Assembly((Placement("a", "ex-0", np.eye(4), 1.0, (LobeTransform(2**40, np.eye(4)),)),))
     err(server, P.SessionLoad(assembly=far), "bad_input", "lobe_transforms[0].lobe")
-    loop = Assembly(a.placements, (), (MergeLink("a", "b", 1, 1), MergeLink("b", "a", 1, 1)))
-    err(server, P.SessionLoad(assembly=loop), "bad_input", "cycle")
+    loop = [{"a": "a", "b": "b", "vertex_a": 1, "vertex_b": 1}, {"a": "b", "b": "a", "vertex_a": 1, "vertex_b": 1}]
+    with pytest.raises(ProtocolError, match=r"^session\.load\.assembly: not a valid Assembly: Assembly\.merges: .* cycle"):
+        P.parse(session_load_frames(a, lambda m: m.update(merges=loop)))
     info = ok(server, P.SessionLoad(assembly=a))
     assert np.isfinite(ok(server, P.SessionHBL(session=info.session)).hbl.branches[0].points).all()
 

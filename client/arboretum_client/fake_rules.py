@@ -45,22 +45,23 @@ def world_structure(example: Example, p: Placement) -> HBL:
 
 
 def recombine(a: Assembly, lookup, instance: str) -> tuple[Assembly, tuple[str, ...]]:
-    """Link ``instance`` to any placement whose main branch passes near its main-branch base."""
+    """Link ``instance`` to the placement whose main branch passes nearest its main-branch base (within
+    ``MERGE_DISTANCE``): merged into one placement only, as ``Assembly`` requires of its links."""
     if not instance or not any(p.instance == instance for p in a.placements):
         return a, ()
     me = next(p for p in a.placements if p.instance == instance)
     base = world_structure(lookup(me.example_id), me).branches[0].points[0]
-    links = [m for m in a.merges if instance not in (m.a, m.b)]
-    merged = []
+    links = tuple(m for m in a.merges if instance not in (m.a, m.b))
+    best: tuple[float, MergeLink] | None = None
     for other in a.placements:
         if other.instance == instance:
             continue
-        main = world_structure(lookup(other.example_id), other).branches[0].points
-        d = np.linalg.norm(main - base, axis=1)
-        if d.min() < MERGE_DISTANCE:
-            links.append(MergeLink(other.instance, instance, int(d.argmin()), 0))
-            merged.append(other.instance)
-    return dataclasses.replace(a, merges=tuple(links)), tuple(merged)
+        d = np.linalg.norm(world_structure(lookup(other.example_id), other).branches[0].points - base, axis=1)
+        if d.min() < MERGE_DISTANCE and (best is None or d.min() < best[0]):
+            best = (float(d.min()), MergeLink(other.instance, instance, int(d.argmin()), 0))
+    if best is None:
+        return dataclasses.replace(a, merges=links), ()
+    return dataclasses.replace(a, merges=(*links, best[1])), (best[1].a,)
 
 
 def sketch_example(strokes: Sequence[np.ndarray], example_id: str) -> tuple[Example, list[str]]:

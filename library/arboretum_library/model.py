@@ -13,8 +13,9 @@ under its holder. Construction validates shapes, finiteness and index ranges, an
 
 from __future__ import annotations
 
+import functools
 import math
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import Any
@@ -168,6 +169,26 @@ class HBL:
             if lobe.branch >= len(self.branches):
                 raise ValidationError(f"HBL.lobes[{j}].branch: {lobe.branch} is out of range")
 
+    def arrays(self) -> Iterator[tuple[str, np.ndarray]]:
+        """(field path, array) of every coordinate and radius the structure holds, e.g.
+        ``("lobes[2].hull_vertices", (V, 3) array)``: the root, source points, branch points and radii,
+        lobe points, hull vertices and centres (metres)."""
+        yield "root", self.root
+        yield "points", self.points
+        for i, b in enumerate(self.branches):
+            yield f"branches[{i}].points", b.points
+            yield f"branches[{i}].radii", b.radii
+        for j, lb in enumerate(self.lobes):
+            yield f"lobes[{j}].points", lb.points
+            yield f"lobes[{j}].hull_vertices", lb.hull_vertices
+            yield f"lobes[{j}].centre", lb.centre
+
+    @functools.cached_property
+    def extent(self) -> float:
+        """Largest magnitude, metres, of any coordinate or radius in ``arrays()`` (computed once: the
+        record never changes)."""
+        return max((float(np.abs(a).max()) for _, a in self.arrays() if a.size), default=0.0)
+
     def by_level(self, level: Level) -> list[int]:
         """Indices of the branches at ``level``."""
         return [i for i, b in enumerate(self.branches) if b.level == level]
@@ -239,6 +260,17 @@ that every product of the transforms stays finite in float64 (a scale of 1e308 m
 MAX_OFFSET = 1e7
 """Largest translation, metres, of a placement or a lobe edit along any axis (10,000 km: a tree placed
 at its UTM northing, up to 9,300 km, or at geocentric coordinates, up to 6,400 km, still fits)."""
+
+
+MAX_SKETCH_COORDINATE = 1e8
+"""Largest magnitude, metres, of any coordinate or radius of a sketched example (``Assembly.sketches``).
+A sketch is drawn in the world, its stroke samples within ``MAX_OFFSET`` of the origin and at most 10 km
+of strokes in all (``service.handlers.assembly``), and kept in a frame at its root: its coordinates are
+differences of two such samples (up to 2e7 m) plus lobe hulls reaching at most twice their stroke's
+spread beyond them (up to 2e4 m), so 1e8 m never refuses a sketch, while a placed one (scale up to 1e6,
+translation up to 1e7 m) stays far inside float32 and float64. Library examples are not bounded by it:
+decomposed without a target height they keep the scan's frame and units, up to 1e12
+(``decompose.preprocess.MAX_COORDINATE``)."""
 
 
 def _check_scale(where: str, s: float) -> None:
@@ -326,7 +358,12 @@ class MergeLink:
 
 @dataclass(frozen=True, eq=False)
 class Assembly:
-    """A new tree under construction: placed examples, sketched examples and merge links."""
+    """A new tree under construction: placed examples, sketched examples and merge links.
+
+    Built only valid, wherever it comes from (an edit, a file, a request): instance names unique, each
+    link joining two placed instances, the links a forest (no instance merged into two placements, no
+    cycle; checked in O(len(merges))) and every sketch within ``MAX_SKETCH_COORDINATE``.
+    """
 
     placements: tuple[Placement, ...] = ()
     sketches: tuple[Example, ...] = ()
@@ -336,9 +373,47 @@ class Assembly:
     def __post_init__(self) -> None:
         for name in ("placements", "sketches", "merges"):
             object.__setattr__(self, name, tuple(getattr(self, name)))
-        names = [p.instance for p in self.placements]
-        if len(set(names)) != len(names):
+        names = {p.instance for p in self.placements}
+        if len(names) != len(self.placements):
             raise ValidationError("Assembly.placements: instance names must be unique")
         for m in self.merges:
             if m.a not in names or m.b not in names or m.a == m.b:
                 raise ValidationError(f"Assembly.merges: link {m.a!r}-{m.b!r} must join two placed instances")
+        _check_forest(self.merges)
+        for i, sk in enumerate(self.sketches):
+            if sk.structure.extent > MAX_SKETCH_COORDINATE:
+                _refuse_far_sketch(i, sk.structure)
+
+
+def _check_forest(merges: tuple[MergeLink, ...]) -> None:
+    """``ValidationError`` unless every instance is merged into at most one other and following the
+    links from any instance (``b`` to ``a``) ends at an unmerged one. O(len(merges)): each instance
+    is walked once, then marked done."""
+    parent: dict[str, str] = {}
+    for m in merges:
+        if m.b in parent:
+            raise ValidationError(
+                f"Assembly.merges: {m.b!r} is merged into two placements ({parent[m.b]!r} and {m.a!r})")
+        parent[m.b] = m.a
+    done: set[str] = set()
+    for start in parent:
+        path: dict[str, None] = {}
+        name = start
+        while name in parent and name not in done:
+            path[name] = None
+            name = parent[name]
+            if name in path:
+                loop = [*list(path)[list(path).index(name):], name]
+                shown = " -> ".join(repr(n) for n in loop[:6]) + (" -> ..." if len(loop) > 6 else "")
+                raise ValidationError(
+                    f"Assembly.merges: the links through {name!r} form a cycle ({shown}: each merged into the next)")
+        done.update(path)
+
+
+def _refuse_far_sketch(i: int, s: HBL) -> None:
+    """Raise the ``ValidationError`` naming the first array of sketch ``i`` beyond the bound."""
+    for name, a in s.arrays():
+        big = float(np.abs(a).max()) if a.size else 0.0
+        if big > MAX_SKETCH_COORDINATE:
+            raise ValidationError(f"Assembly.sketches[{i}].structure.{name}: a value of {big:.3g} m exceeds "
+                                  f"{MAX_SKETCH_COORDINATE:g} m, farther than any sketch reaches")

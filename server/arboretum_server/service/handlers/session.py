@@ -42,8 +42,11 @@ def load(ctx: Context, req: P.SessionLoad) -> P.SessionInfo:
 
 
 def _checked(ctx: Context, a: Assembly) -> Assembly:
-    """``a`` if every placement names a sketch or a library example (``StoreError`` otherwise), every
-    lobe edit an existing lobe, and the merge links a forest (``InputError`` naming the field)."""
+    """``a`` if every placement names a sketch or a library example (``StoreError`` otherwise) and every
+    lobe edit an existing lobe (``InputError`` naming the field). That the merge links form a forest and
+    sketches lie within bounds is checked when the Assembly is built (``Assembly.__post_init__``): a
+    request breaking it is refused as it is decoded, a ``protocol`` error naming ``Assembly.merges`` or
+    ``Assembly.sketches``."""
     source = resolver(a, ctx.example)
     for i, p in enumerate(a.placements):
         n = len(source(p.example_id).structure.lobes)
@@ -51,20 +54,6 @@ def _checked(ctx: Context, a: Assembly) -> Assembly:
             if lt.lobe >= n:
                 raise InputError(f"session.load: Assembly.placements[{i}].lobe_transforms[{j}].lobe: {lt.lobe} "
                                  f"does not exist ({p.example_id!r} has {n} lobes)")
-    parent: dict[str, str] = {}
-    for m in a.merges:
-        if m.b in parent:
-            raise InputError(f"session.load: Assembly.merges: {m.b!r} is merged into two placements")
-        parent[m.b] = m.a
-    acyclic: set[str] = set()
-    for start in parent:
-        path, name = {start}, start
-        while name in parent and name not in acyclic:
-            name = parent[name]
-            if name in path:
-                raise InputError(f"session.load: Assembly.merges: the links through {start!r} form a cycle")
-            path.add(name)
-        acyclic |= path
     return a
 
 
