@@ -74,7 +74,7 @@ def test_tree_conversion(tmp_path, files, capsys):
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--crown", "missing.obj", "--out", "OUT/t.glb"], "file not found"),
+    (["--crown", "missing.obj", "--out", "OUT/t.glb"], "no such file"),
     (["--crown", "CROWN", "--out", "OUT/t.fbx"], "unknown format '.fbx'"),
     (["--crown", "CROWN", "--out", "OUT/t.usda", "--plain-nodes"], "--plain-nodes applies to .glb only"),
     (["--crown", "CROWN", "--out", "OUT/t.glb", "--modules", "OUT/nothing"], "not a folder"),

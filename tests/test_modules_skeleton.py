@@ -107,7 +107,7 @@ def test_module_set_save_load(tmp_path):
 def test_bad_inputs_raise_input_error(tmp_path):
     with pytest.raises(InputError, match="unsupported"):
         load_mesh(tmp_path / "x.ply")
-    with pytest.raises(InputError, match="not found"):
+    with pytest.raises(InputError, match="no such file"):
         load_mesh(tmp_path / "x.obj")
     with pytest.raises(InputError, match="no .obj"):
         load_module_set(tmp_path)

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from arboretum_library.checks import check_input_file
 from arboretum_library.cli import add_json_flag, emit
 from arboretum_library.errors import InputError
 from arboretum_library.outputs import check_output
@@ -54,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
 
     size = parse_size(args.size)
     for path in args.inputs:
-        check_input(Path(path))
+        check_input_file(path, "INPUT")
     check_output(args.out, "--out", inputs=args.inputs, suffixes=(".png",))
     t0 = time.perf_counter()
     style = HBLStyle(show_points=args.points, grid=False)
@@ -77,7 +78,7 @@ def load_scene(path: Path, style, textures: bool = True):
     textured unless ``textures`` is False."""
     from .scene_build import glb_scene, hbl_scene, mesh_scene, points_scene
 
-    check_input(path)
+    check_input_file(str(path), "INPUT")
     ext = path.suffix.lower()
     if ext == ".glb":
         from arboretum_library.export.gltf_read import read_glb
@@ -95,14 +96,6 @@ def load_scene(path: Path, style, textures: bool = True):
             return mesh_scene(verts, faces, grid=False)
     points, colors = read_point_cloud(path)
     return points_scene(points, colors, grid=False)
-
-
-def check_input(path: Path) -> None:
-    """``InputError`` unless ``path`` names an existing file."""
-    if path.is_dir():
-        raise InputError(f"{path}: is a folder, not a file; give the files in it")
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
 
 
 def load_hbl(path: Path):

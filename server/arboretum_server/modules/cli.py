@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _check_args(args: argparse.Namespace) -> str:
     """The input, the output path and the numbers, checked before any work; the output's suffix."""
-    from arboretum_library.checks import check_seed
+    from arboretum_library.checks import check_input_file, check_seed
 
     from .export import check_format
 
@@ -93,10 +93,7 @@ def _check_args(args: argparse.Namespace) -> str:
     src = Path(source)
     if flag == "--crown" and src.suffix.lower() not in CROWN_FORMATS:
         raise InputError(f"--crown {src}: unsupported format {src.suffix!r} (use {', '.join(CROWN_FORMATS)})")
-    if src.is_dir():
-        raise InputError(f"{flag} {src}: is a folder, not a file")
-    if not src.is_file():
-        raise InputError(f"{flag} {src}: file not found")
+    check_input_file(source, flag)
     check_output(args.out, "--out", inputs=[source])
     suffix = check_format(args.out, args.plain_nodes)
     if args.types is not None and args.types < 1:

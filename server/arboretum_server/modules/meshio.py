@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from arboretum_library.checks import check_input_file
 from arboretum_library.errors import InputError
 from arboretum_library.geometry import yup_to_zup
 
@@ -25,8 +26,7 @@ def load_mesh(path: str | Path, what: str = "module mesh") -> tuple[np.ndarray, 
         raise InputError(
             f"{what} {path}: unsupported format {suffix!r} (use .obj, .glb or .gltf)"
         )
-    if not path.is_file():
-        raise InputError(f"{what} {path}: file not found")
+    check_input_file(str(path), what)
     try:
         mesh = trimesh.load(path, force="mesh", process=True)
     except Exception as exc:  # trimesh raises many types on malformed files
