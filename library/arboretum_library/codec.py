@@ -13,7 +13,6 @@ import functools
 import io
 import json
 import os
-import struct
 import threading
 import tokenize
 import zipfile
@@ -26,6 +25,11 @@ from typing import Any, TypeVar, get_args, get_origin, get_type_hints
 import numpy as np
 
 from .errors import InputError, ValidationError
+
+try:
+    from lzma import LZMAError
+except ImportError:  # a Python built without lzma: zipfile cannot read (or raise) it either
+    LZMAError = zlib.error
 
 T = TypeVar("T")
 ARRAY = "$array"
@@ -116,22 +120,45 @@ def arrays_to_npz(arrays: Mapping[str, np.ndarray], *, compress: bool = False) -
     return buf.getvalue()
 
 
-_DAMAGED = (ValueError, OSError, EOFError, KeyError, IndexError, TypeError, OverflowError, MemoryError,
-            NotImplementedError, RuntimeError, SyntaxError, struct.error, zlib.error, zipfile.BadZipFile,
-            tokenize.TokenError)
-"""What ``np.load`` raises on a cut, corrupted or hostile .npz (seen by fuzzing: a bad zip directory or
-CRC, a bad deflate stream, an 'encrypted' or unknown-method member, a garbled .npy header)."""
+_DAMAGED = (ValueError, OSError, EOFError, TypeError, OverflowError, MemoryError, NotImplementedError,
+            SyntaxError, zlib.error, LZMAError, zipfile.BadZipFile, tokenize.TokenError)
+"""What reading a cut, corrupted or hostile .npz raises on numpy 2.4 / Python 3.11 (found by fuzzing,
+see tests/test_codec_fuzz.py):
+
+- the zip: ``BadZipFile`` (directory, header, CRC), ``NotImplementedError`` (zip version, flag bits,
+  compression method), ``zlib.error``, ``LZMAError``, ``OSError`` (bz2) or ``EOFError`` from a bad or
+  short stream, ``ValueError`` (a negative seek), ``EOFError`` (no bytes at all);
+- a .npy header: ``ValueError`` (numpy's checks, text that does not decode), ``TypeError`` (an
+  unhashable dict key), ``SyntaxError``/``TokenError`` (numpy's header filter), ``OverflowError`` (a
+  dimension beyond int64) and ``MemoryError`` when it declares a shape of terabytes: numpy allocates the
+  array before reading its bytes.
+
+Encrypted members (zipfile's ``RuntimeError``) are refused before reading, so a ``RuntimeError`` (or a
+``RecursionError``) still shows as the bug it is."""
+
+_ENCRYPTED = 0x1
+"""Bit 0 of a zip member's general purpose flags: encrypted (zipfile would raise ``RuntimeError``)."""
 
 
 def npz_to_arrays(data: bytes | io.BufferedIOBase, where: str = "npz") -> dict[str, np.ndarray]:
     """Read every array of an .npz, refusing pickled object arrays; ``ValidationError`` if it is damaged."""
     src = io.BytesIO(data) if isinstance(data, bytes) else data
     try:
-        with np.load(src, allow_pickle=False) as z:
-            return {k: z[k] for k in z.files}
+        loaded = np.load(src, allow_pickle=False)
+        if not isinstance(loaded, np.lib.npyio.NpzFile):  # a bare .npy array
+            raise ValidationError(f"{where}: not a readable .npz (one .npy array, not a zip of arrays)")
+        with loaded as z:
+            locked = [m.filename for m in z.zip.infolist() if m.flag_bits & _ENCRYPTED]
+            if locked:
+                raise ValidationError(f"{where}: not a readable .npz ({locked[0]!r} is encrypted)")
+            arrays = {k: z[k] for k in z.files}
     except _DAMAGED as exc:
         detail = str(exc).splitlines()[0][:200] if str(exc) else type(exc).__name__
         raise ValidationError(f"{where}: not a readable .npz, damaged or cut short ({detail})") from None
+    for k, v in arrays.items():
+        if not isinstance(v, np.ndarray):  # numpy hands back the raw bytes of a member that is not .npy
+            raise ValidationError(f"{where}: not a readable .npz, damaged or cut short ({k!r} is not an array)")
+    return arrays
 
 
 META_KEY = "__meta__"
