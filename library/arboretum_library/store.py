@@ -11,22 +11,22 @@ Layout::
 
 A ``Library`` holds a path and one SQLite connection; use one per thread. Any number of processes can
 read while one writes; writers take turns through the lock file, each waiting at most ``lock_timeout``
-seconds for it (then ``LibraryBusy``). A reader finding the catalog missing or damaged raises
-``CatalogDamaged``; a writer rebuilds it from the folders and reconnects when another process did.
+seconds for it (then ``LibraryBusy``; see ``store_lock``). A reader finding the catalog missing or
+damaged raises ``CatalogDamaged``; a writer rebuilds it from the folders, and every open library
+reconnects when another process did (see ``store_catalog``). Crash recovery: ``recovery``.
 """
 
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import json
 import os
 import shutil
 import sqlite3
-import threading
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import replace as with_fields
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
@@ -49,26 +49,13 @@ from .folders import (
 )
 from .model import Example
 from .progress import ProgressFn, no_progress
-from .recovery import (
-    CATALOG,
-    Recovery,
-    open_catalog,
-    reconcile,
-    unique,
-    wait_for_lock,
-    write_journal,
-)
-
-LOCK_TIMEOUT_S = 10.0
-"""How long a writer waits for another process's write lock by default before ``LibraryBusy``."""
+from .recovery import Recovery, reconcile, unique, write_journal
+from .store_catalog import CatalogLink
+from .store_lock import LOCK_TIMEOUT_S, LibraryBusy, WriteLock
 
 __all__ = ["CatalogDamaged", "Library", "LibraryBusy", "LOCK_TIMEOUT_S"]
 
-
-class LibraryBusy(StoreError):
-    """Another process held the library's write lock for longer than this one would wait."""
-
-    code = "busy"
+T = TypeVar("T")
 
 
 class Library:
@@ -77,10 +64,6 @@ class Library:
     def __init__(self, root: Path, readonly: bool, durable: bool, lock_timeout: float | None = LOCK_TIMEOUT_S,
                  on_wait: Callable[[str], None] | None = None) -> None:
         self.root = root
-        self._con: sqlite3.Connection | None = None
-        self._catalog_ident: tuple[int, int] | None = None
-        self._broken = False
-        self._held: int | None = None  # the thread holding the write lock (re-entrant for it only)
         self.readonly = readonly
         self.durable = durable
         self.lock_timeout = lock_timeout
@@ -89,6 +72,8 @@ class Library:
         """Called with a message when a write has to wait for the lock (e.g. to tell a CLI user)."""
         self.recovered = Recovery()
         """What reconciling did when this (writing) library was opened."""
+        self._catalog = CatalogLink(root, readonly, durable, self.recovered)
+        self._write_lock = WriteLock(root)
 
     # -- opening -----------------------------------------------------------------------------
     @classmethod
@@ -105,23 +90,38 @@ class Library:
         check_marker(root, create and not readonly)
         lib = cls(root, readonly, fsync, lock_timeout, on_wait)
         if readonly:
-            lib._connect()
+            lib._catalog.connect()
             return lib
         for sub in ("examples", ".tmp"):
             (root / sub).mkdir(exist_ok=True)
         try:
             with lib._lock(finish_crashed=False):
-                lib._connect(locked=True)
+                lib._catalog.connect(locked=True)
                 lib.recovered.merge(reconcile(lib._con, root, full=True))
         except BaseException:
             lib.close()
             raise
         return lib
 
+    @classmethod
+    def open_reading(cls, path: str | os.PathLike, *, lock_timeout: float | None = LOCK_TIMEOUT_S,
+                     on_wait: Callable[[str], None] | None = None) -> Library:
+        """Open the library at ``path`` to read it: read-only, or as a writer (``lock_timeout``,
+        ``on_wait``) when its catalog is missing or damaged, which rebuilds it from the example folders
+        (``recovered.catalog_problem`` then says why). ``StoreError`` naming the catalog and the reason
+        when this process cannot write the library to rebuild it."""
+        try:
+            return cls.open(path, readonly=True)
+        except CatalogDamaged as damaged:
+            try:
+                return cls.open(path, lock_timeout=lock_timeout, on_wait=on_wait)
+            except OSError as why:
+                where = f": {why.filename}" if why.filename else ""
+                raise StoreError(f"{damaged}, but this process cannot write the library "
+                                 f"({why.strerror or why}{where})") from None
+
     def close(self) -> None:
-        if self._con is not None:
-            self._con.close()
-            self._con = None
+        self._catalog.close()
 
     def __enter__(self) -> Library:
         return self
@@ -271,10 +271,30 @@ class Library:
         write_folder(stage, meta, npz, self.durable)
         entry = entry_for(example, json.loads(meta), len(meta) + len(npz))
         old, journal = self._swap_in(stage, target, example.id)
-        self._commit(lambda: catalog.upsert(self._con, entry))
+        self._catalog.commit(lambda con: catalog.upsert(con, entry))
         if old is not None:
             shutil.rmtree(old)
         journal.unlink()
+
+    def _swap_in(self, stage: Path, target: Path, id_: str) -> tuple[Path | None, Path]:
+        """Rename the staged folder to ``target``; returns where the replaced folder went, the journal."""
+        tmp = self.root / ".tmp"
+        if not target.exists():
+            journal = write_journal(tmp, "add", id_, None, self.durable)
+            os.rename(stage, target)
+            old = None
+        else:
+            aside = unique("aside-")
+            journal = write_journal(tmp, "replace", id_, aside, self.durable)
+            if exchange(stage, target):
+                old = stage
+            else:
+                os.rename(target, tmp / aside)
+                os.rename(stage, target)
+                old = tmp / aside
+        if self.durable:
+            fsync_path(target.parent)
+        return old, journal
 
     def delete(self, id_: str) -> None:
         """Remove example ``id_`` (catalog row first, then its folder)."""
@@ -289,7 +309,7 @@ class Library:
         """``delete`` with the lock held."""
         target = self._folder(id_)
         journal = write_journal(self.root / ".tmp", "delete", id_, None, self.durable)
-        self._commit(lambda: catalog.remove(self._con, [id_]))
+        self._catalog.commit(lambda con: catalog.remove(con, [id_]))
         if target.exists():
             trash = self.root / ".tmp" / unique("trash-")
             os.rename(target, trash)
@@ -328,106 +348,30 @@ class Library:
 
     @contextlib.contextmanager
     def _lock(self, finish_crashed: bool = True) -> Iterator[None]:
-        """Hold the library's write lock (waiting at most ``lock_timeout``, else ``LibraryBusy``); then
-        reconnect if the catalog was replaced or damaged and finish any crashed write found in ``.tmp/``.
-        Re-entrant: inside a held lock (``add_new`` calling ``add``) it just goes on."""
-        if self._held == threading.get_ident():
+        """Hold the write lock (see ``store_lock``); then reconnect if the catalog was replaced or damaged
+        (rebuilding it) and finish any crashed write found in ``.tmp/``. Re-entrant for this thread."""
+        if self._write_lock.held_here():
             yield
             return
-        with open(self.root / ".lock", "a+b") as f:
-            waiting = f"waiting for the library {self.root}: another process is writing it (Ctrl-C to stop)"
-            on_wait = (lambda: self.on_wait(waiting)) if self.on_wait is not None else None
-            if not wait_for_lock(f.fileno(), self.lock_timeout, on_wait):
-                raise LibraryBusy(f"the library {self.root} is being written by another process "
-                                  f"(waited {self.lock_timeout:g} s); try again")
-            self._held = threading.get_ident()
+        with self._write_lock.hold(self.lock_timeout, self.on_wait):
             try:
                 if finish_crashed:
-                    self._sync(locked=True)
+                    self._catalog.sync(locked=True)
                     if any((self.root / ".tmp").iterdir()):
                         reconcile(self._con, self.root, full=False)
                 yield
             except sqlite3.DatabaseError as exc:
-                raise self._damaged(exc) from None
-            finally:
-                self._held = None
-                fcntl.flock(f.fileno(), fcntl.LOCK_UN)
+                raise self._catalog.damaged(exc) from None
 
-    # -- the catalog connection --------------------------------------------------------------
-    def _connect(self, locked: bool = False) -> None:
-        """(Re)connect to the catalog; a writer holding the lock (``locked``) rebuilds it when it is
-        missing or damaged, anyone else gets ``CatalogDamaged``."""
-        db = self.root / CATALOG
-        ident = _ident(db)
-        if self._con is not None:
-            self._con.close()
-            self._con = None
-        self._broken = True
-        if locked and not self.readonly:
-            self._con = open_catalog(self.root, self.durable, self.recovered)
-            ident = _ident(db)
-        else:
-            self._con = catalog.connect(db, readonly=self.readonly, durable=self.durable)
-        self._catalog_ident, self._broken = ident, False
+    # -- the catalog connection (see ``store_catalog``) ---------------------------------------
+    @property
+    def _con(self) -> sqlite3.Connection:
+        return self._catalog.con
 
-    def _sync(self, locked: bool = False) -> None:
-        """Reconnect when another process replaced (rebuilt) the catalog file, or after damage."""
-        if self._broken or self._con is None or _ident(self.root / CATALOG) != self._catalog_ident:
-            self._connect(locked)
-
-    def _read(self, query: Callable[[sqlite3.Connection], object]):
+    def _read(self, query: Callable[[sqlite3.Connection], T]) -> T:
         """``query(con)`` on a current catalog; a writer rebuilds a damaged catalog once and retries."""
-        for attempt in range(2):
-            try:
-                self._sync()
-                return query(self._con)
-            except (sqlite3.DatabaseError, CatalogDamaged) as exc:
-                err = exc if isinstance(exc, CatalogDamaged) else self._damaged(exc)
-                if self.readonly or attempt or not isinstance(err, CatalogDamaged):
-                    raise err from None
-                self._broken = True
-                with self._lock():  # takes the lock and rebuilds
-                    pass
+        return self._catalog.read(query, None if self.readonly else self._rebuild_catalog)
 
-    def _damaged(self, exc: sqlite3.DatabaseError) -> StoreError:
-        err = catalog.damaged(self.root / CATALOG, exc)
-        self._broken = self._broken or isinstance(err, CatalogDamaged)
-        return err
-
-    def _swap_in(self, stage: Path, target: Path, id_: str) -> tuple[Path | None, Path]:
-        """Rename the staged folder to ``target``; returns where the replaced folder went, the journal."""
-        tmp = self.root / ".tmp"
-        if not target.exists():
-            journal = write_journal(tmp, "add", id_, None, self.durable)
-            os.rename(stage, target)
-            old = None
-        else:
-            aside = unique("aside-")
-            journal = write_journal(tmp, "replace", id_, aside, self.durable)
-            if exchange(stage, target):
-                old = stage
-            else:
-                os.rename(target, tmp / aside)
-                os.rename(stage, target)
-                old = tmp / aside
-        if self.durable:
-            fsync_path(target.parent)
-        return old, journal
-
-    def _commit(self, change) -> None:
-        self._con.execute("BEGIN IMMEDIATE")
-        try:
-            change()
-        except BaseException:
-            self._con.execute("ROLLBACK")
-            raise
-        self._con.execute("COMMIT")
-
-
-def _ident(path: Path) -> tuple[int, int] | None:
-    """(device, inode) of ``path``, None when missing: tells whether another process replaced the file."""
-    try:
-        st = os.stat(path)
-    except FileNotFoundError:
-        return None
-    return st.st_dev, st.st_ino
+    def _rebuild_catalog(self) -> None:
+        with self._lock():  # taking the lock reconnects, rebuilding a damaged catalog
+            pass

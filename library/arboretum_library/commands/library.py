@@ -63,18 +63,13 @@ def _open(path: str, readonly: bool = True, create: bool = False):
     """The library at ``path``. Writers wait for another process writing it as long as it takes, saying
     so on stderr (Ctrl-C stops them). A reader finding the catalog missing or damaged rebuilds it from
     the example folders as a writer would (the damaged file is kept aside) and says so on stderr; when
-    it cannot write the library, one error names the file and what to do."""
-    from arboretum_library.errors import StoreError
-    from arboretum_library.store import CatalogDamaged, Library
+    it cannot write the library, one error names the file and what to do (``Library.open_reading``)."""
+    from arboretum_library.store import Library
 
-    try:
-        lib = Library.open(path, create, readonly=readonly, lock_timeout=None, on_wait=tell)
-    except CatalogDamaged as exc:
-        try:  # as a writer, which rebuilds it
-            lib = Library.open(path, lock_timeout=None, on_wait=tell)
-        except OSError as why:
-            where = f": {why.filename}" if why.filename else ""
-            raise StoreError(f"{exc}, but this process cannot write the library ({why.strerror or why}{where})") from None
+    if readonly:
+        lib = Library.open_reading(path, lock_timeout=None, on_wait=tell)
+    else:
+        lib = Library.open(path, create, lock_timeout=None, on_wait=tell)
     r = lib.recovered
     if r.catalog_problem:
         kept = f"; the damaged file is kept as {r.catalog_kept}" if r.catalog_kept else ""

@@ -41,13 +41,10 @@ def read_script(path: str | Path) -> tuple[str, list[dict]]:
 
     import yaml
 
+    from arboretum_library.checks import check_input_file
     from arboretum_library.errors import InputError
 
-    p = Path(path)
-    if p.is_dir():
-        raise InputError(f"{p}: is a folder, not a script")
-    if not p.is_file():
-        raise InputError(f"{p}: no such script")
+    p = check_input_file(str(path), "script")
     try:
         text = p.read_text(encoding="utf-8")
     except UnicodeDecodeError:
@@ -68,18 +65,15 @@ def read_script(path: str | Path) -> tuple[str, list[dict]]:
 
 def open_library(path: str | Path):
     """The library at ``path`` opened for reading (a script only reads examples, so neither its lock nor
-    write access is needed); a writing open only to rebuild a missing or damaged catalog. ``InputError``
-    naming ``--library`` when it cannot be opened."""
+    write access is needed); a writing open only to rebuild a missing or damaged catalog
+    (``Library.open_reading``). ``InputError`` naming ``--library`` when it cannot be opened."""
     import sqlite3
 
     from arboretum_library.errors import ArboretumError, InputError
-    from arboretum_library.store import CatalogDamaged, Library
+    from arboretum_library.store import Library
 
     try:
-        try:
-            return Library.open(path, readonly=True)
-        except CatalogDamaged:
-            return Library.open(path)
+        return Library.open_reading(path)
     except InputError as exc:
         raise InputError(f"--library: {exc}") from None
     except (ArboretumError, OSError, sqlite3.Error) as exc:
