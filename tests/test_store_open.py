@@ -148,3 +148,21 @@ def test_assemble_names_a_missing_or_folder_script(tmp_path):
         read_script(tmp_path)
     (tmp_path / "s.yaml").write_text("name: tree\nops:\n  - undo: {}\n")
     assert read_script(tmp_path / "s.yaml") == ("tree", [{"undo": {}}])
+
+
+def test_grow_and_modules_read_an_assembly_against_a_library_whose_catalog_is_damaged(lib_path, tmp_path):
+    """``world.load_structure`` (what ``grow`` and ``modules`` read) rebuilds a damaged catalog as the
+    other readers do, and places the example it names."""
+    from arboretum_library.codec import save_record
+    from arboretum_library.model import Assembly, Placement
+    from arboretum_server.assembly.world import load_structure
+
+    record = tmp_path / "tree.npz"
+    save_record(record, Assembly((Placement("a", "ex-1", np.eye(4)),)))
+    (lib_path / "catalog.sqlite").write_bytes(b"not a database" * 100)
+    hbl = load_structure(str(record), str(lib_path))
+    with Library.open(lib_path, readonly=True) as lib:
+        want = lib.get("ex-1").structure
+        assert len(lib) == N
+    assert len(hbl.branches) == len(want.branches) and len(hbl.lobes) == len(want.lobes) == 3
+    np.testing.assert_allclose(hbl.branches[0].points, want.branches[0].points)

@@ -169,7 +169,7 @@ def load_structure(path: str, library: str | None) -> HBL:
         raise InputError(f"{path}: holds a {kind!r} record; expected an HBL or an Assembly")
     if library is None:
         raise InputError(f"{path}: an Assembly record needs --library LIB (the examples it places)")
-    lib = Library.open(library, readonly=True)
+    lib = Library.open_reading(library)
     try:
         return assembly_to_hbl(load_record(path, Assembly), lib.get)
     finally:

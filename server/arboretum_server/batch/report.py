@@ -46,7 +46,7 @@ def library_descriptors(library: str | os.PathLike) -> dict[str, tuple[np.ndarra
     from arboretum_library.store import Library
 
     out: dict[str, tuple[list, list]] = {}
-    with Library.open(library, readonly=True) as lib:
+    with Library.open_reading(library) as lib:
         for e in lib.entries():
             lobes, curv = out.setdefault(e.species, ([], []))
             lobes.append(e.descriptors.lobe_count)
