@@ -166,3 +166,20 @@ def test_grow_and_modules_read_an_assembly_against_a_library_whose_catalog_is_da
         assert len(lib) == N
     assert len(hbl.branches) == len(want.branches) and len(hbl.lobes) == len(want.lobes) == 3
     np.testing.assert_allclose(hbl.branches[0].points, want.branches[0].points)
+
+
+def test_provenance_is_read_from_meta_json_alone(lib_path):
+    """``Library.provenance`` gives what ``get`` gives, without the arrays: a damaged arrays.npz does not
+    stop it, a damaged meta.json or a missing id is one StoreError naming it."""
+    folder = lib_path / "examples" / "ex-2"
+    with Library.open(lib_path, readonly=True) as lib:
+        want = lib.get("ex-2").provenance
+        (folder / "arrays.npz").write_bytes(b"cut")
+        assert lib.provenance("ex-2") == want
+        with pytest.raises(StoreError, match="ex-2"):
+            lib.get("ex-2")
+        with pytest.raises(StoreError, match="no example 'ex-9'"):
+            lib.provenance("ex-9")
+        (folder / "meta.json").write_text('{"format": "something else"}')
+        with pytest.raises(StoreError, match=r"ex-2 is damaged: .*not an Arboretum example"):
+            lib.provenance("ex-2")

@@ -21,7 +21,7 @@ from typing import Any
 from .catalog import SCHEMA_VERSION, Entry
 from .codec import arrays_to_npz, flatten, npz_to_arrays, unflatten
 from .errors import InputError, StoreError, ValidationError
-from .model import Example
+from .model import Example, Provenance
 
 META = "meta.json"
 ARRAYS = "arrays.npz"
@@ -98,8 +98,8 @@ def entry_for(example: Example, head: dict[str, Any], size_bytes: int) -> Entry:
                  example.descriptors, head["arrays_sha256"], size_bytes, head["created"])
 
 
-def decode(meta_bytes: bytes, npz_bytes: bytes, where: str) -> tuple[Example, dict[str, Any]]:
-    """Check and rebuild an example from its two files; ``ValidationError`` says what is wrong."""
+def _head(meta_bytes: bytes, where: str) -> dict[str, Any]:
+    """The checked header of an example's meta.json; ``ValidationError`` says what is wrong."""
     try:
         head = json.loads(meta_bytes.decode())
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
@@ -111,6 +111,12 @@ def decode(meta_bytes: bytes, npz_bytes: bytes, where: str) -> tuple[Example, di
     for key in ("id", "created", "arrays_sha256", "example"):
         if key not in head:
             raise ValidationError(f"{where}/{META}: the field {key!r} is missing")
+    return head
+
+
+def decode(meta_bytes: bytes, npz_bytes: bytes, where: str) -> tuple[Example, dict[str, Any]]:
+    """Check and rebuild an example from its two files; ``ValidationError`` says what is wrong."""
+    head = _head(meta_bytes, where)
     if hashlib.sha256(npz_bytes).hexdigest() != head["arrays_sha256"]:
         raise ValidationError(f"{where}/{ARRAYS} is corrupt (its SHA-256 differs from the one in {META})")
     arrays = npz_to_arrays(npz_bytes, f"{where}/{ARRAYS}")
@@ -177,6 +183,18 @@ def free_ids(taken_ids: list[str], examples: Path, prefix: str, count: int) -> l
             out.append(f"{prefix}-{n:04d}")
         n += 1
     return out
+
+
+def read_provenance(folder: Path) -> Provenance:
+    """The provenance of the example in ``folder``, from its meta.json alone (its arrays are neither read
+    nor checked). ``FileNotFoundError`` when there is none; ``StoreError`` names a broken one."""
+    meta = (folder / META).read_bytes()
+    try:
+        head = _head(meta, str(folder))
+        example = head["example"]
+        return unflatten(Provenance, example.get("provenance") if isinstance(example, dict) else None, {})
+    except ValidationError as exc:
+        raise StoreError(f"example {folder.name} is damaged: {exc}") from None
 
 
 def read_revision(folder: Path) -> str:

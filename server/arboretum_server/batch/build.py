@@ -185,7 +185,7 @@ def _plan(lib, records: list[ScanRecord], result: BuildResult) -> list[ScanRecor
         ids = lib.find_source(r.sha256)
         if ids and _complete(lib, ids):
             r.status, r.examples = "skipped", list(ids)
-            r.notes = list(lib.get(ids[0]).provenance.parameters.get(NOTES_KEY, []))
+            r.notes = list(lib.provenance(ids[0]).parameters.get(NOTES_KEY, []))
             continue
         for id_ in ids:  # a build was killed while storing this scan: start it again
             lib.delete(id_)
@@ -195,7 +195,7 @@ def _plan(lib, records: list[ScanRecord], result: BuildResult) -> list[ScanRecor
 
 
 def _complete(lib, ids: list[str]) -> bool:
-    want = lib.get(ids[0]).provenance.parameters.get(SCAN_EXAMPLES_KEY)
+    want = lib.provenance(ids[0]).parameters.get(SCAN_EXAMPLES_KEY)
     return want is None or len(ids) >= int(want)
 
 
