@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from arboretum_library.model import HBL
@@ -19,8 +21,16 @@ def grow_tree(hbl: HBL, opts: GrowOptions, rng: np.random.Generator,
               progress: ProgressFn = no_progress) -> GrownTree:
     """Colonize every lobe of ``hbl`` from its bud, then give the whole tree radii and leaves.
 
-    Same ``rng`` state, same tree. Radii follow ``opts.branch_radii`` (see ``_radii``).
+    Same ``rng`` state, same tree. Radii follow ``opts.branch_radii`` (see ``_radii``). The tree grows in
+    a frame whose origin is the HBL root rounded to whole metres (``growth_origin``), so a tree placed
+    at UTM or geocentric coordinates grows as it does at the origin, only translated.
     """
+    origin = growth_origin(hbl)
+    if origin.any():
+        tree = grow_tree(translated(hbl, -origin), opts, rng, progress)
+        lv = tree.leaves
+        leaves = Leaves(lv.centres + origin, lv.normals, lv.axes, lv.sizes, lv.lobe)
+        return dataclasses.replace(tree, positions=tree.positions + origin, leaves=leaves)
     graph = branch_graph(hbl)
     step = opts.step if opts.step is not None else default_step(hbl.lobes)
     positions, parents, levels, lobe = graph.positions, graph.parents, graph.levels, None
@@ -37,6 +47,27 @@ def grow_tree(hbl: HBL, opts: GrowOptions, rng: np.random.Generator,
     radii = _radii(hbl, graph, parents, lobe, opts, step)
     progress(1, 1, f"grown {int((lobe >= 0).sum())} twig nodes, {len(leaves.sizes)} leaves")
     return GrownTree(positions, parents, radii, levels, lobe, leaves, float(step), iterations)
+
+
+def growth_origin(hbl: HBL) -> np.ndarray:
+    """(3,) float64, metres: the origin of the frame a tree grows in, its root rounded to whole metres.
+
+    (0, 0, 0) for a tree rooted within half a metre of the world origin (it grows where it stands, bit
+    for bit as before). Growth depends on absolute coordinates through its cell grid, its hull sampling
+    and float rounding; relative to this origin it does not, and subtracting a whole number of metres
+    from coordinates near it is exact.
+    """
+    return np.round(np.asarray(hbl.root, np.float64)) + 0.0
+
+
+def translated(hbl: HBL, offset: np.ndarray) -> HBL:
+    """``hbl`` moved by ``offset`` (3,): root, branch points, lobe points, hulls, centres, source points."""
+    off = np.asarray(offset, np.float64)
+    branches = tuple(dataclasses.replace(b, points=b.points + off) for b in hbl.branches)
+    lobes = tuple(dataclasses.replace(lb, points=lb.points + off, hull_vertices=lb.hull_vertices + off,
+                                      centre=lb.centre + off) for lb in hbl.lobes)
+    return dataclasses.replace(hbl, root=hbl.root + off, branches=branches, lobes=lobes,
+                               points=hbl.points + off)
 
 
 def _radii(hbl: HBL, graph: BranchGraph, parents: np.ndarray, lobe: np.ndarray, opts: GrowOptions,
