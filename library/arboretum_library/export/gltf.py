@@ -2,7 +2,9 @@
 
 The world is Z up; glTF is Y up, so positions and normals go through ``geometry.zup_to_yup`` and node
 matrices through the same change of basis. Nodes that share a mesh are written as plain nodes (every
-importer reads them); no extension is needed. numpy and the standard library only.
+importer reads them); no extension is needed. Meshes given in the world frame of a scene far from the
+origin (``parts.local_origin``) are written relative to it under a root node "origin" whose translation
+(JSON, float64) puts them back. numpy and the standard library only.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import numpy as np
 
 from arboretum_library.geometry import zup_to_yup
 
-from .parts import Material, MeshPart, Node
+from .parts import Material, MeshPart, Node, local_origin
 
 FLOAT, UINT16, UINT32 = 5126, 5123, 5125
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
@@ -66,8 +68,10 @@ class _Builder:
         return len(self.doc["accessors"]) - 1
 
 
-def _primitive(b: _Builder, part: MeshPart) -> dict[str, Any]:
-    pos = zup_to_yup(part.positions).astype(np.float32)
+def _primitive(b: _Builder, part: MeshPart, origin: np.ndarray | None = None) -> dict[str, Any]:
+    """The primitive of ``part``, its positions relative to ``origin`` (3,) (world, Z up) if given."""
+    pos = part.positions if origin is None or not origin.any() else part.positions - origin
+    pos = zup_to_yup(pos).astype(np.float32)
     attrs = {"POSITION": b.accessor(pos, "VEC3", ARRAY_BUFFER, minmax=True)}
     if part.normals is not None:
         nrm = zup_to_yup(np.asarray(part.normals, np.float64))
@@ -115,17 +119,22 @@ def glb_bytes(meshes: Sequence[MeshPart], materials: Sequence[Material],
               nodes: Sequence[Node] | None = None) -> bytes:
     """The bytes of a GLB holding ``meshes`` (empty ones are skipped) placed by ``nodes``.
 
-    ``nodes`` defaults to one untransformed node per mesh. Node ``mesh`` indices refer to ``meshes``.
+    ``nodes`` defaults to one untransformed node per mesh (meshes in the world frame: a far scene is
+    written relative to ``local_origin``, see the module docs). Node ``mesh`` indices refer to ``meshes``.
     """
     b = _Builder()
     _materials(b, materials)
     if not b.doc["materials"]:
         del b.doc["materials"]
+    origin = np.zeros(3)
+    if nodes is None:
+        used = [m.positions for m in meshes if len(m.faces)]
+        origin = local_origin(np.concatenate(used) if used else np.zeros((0, 3)))
     written: dict[int, int] = {}
     for i, part in enumerate(meshes):
         if len(part.faces) == 0:
             continue
-        b.doc["meshes"].append({"name": part.name, "primitives": [_primitive(b, part)]})
+        b.doc["meshes"].append({"name": part.name, "primitives": [_primitive(b, part, origin)]})
         written[i] = len(b.doc["meshes"]) - 1
     for node in nodes if nodes is not None else [Node(i, name=m.name) for i, m in enumerate(meshes)]:
         if node.mesh not in written:
@@ -135,7 +144,19 @@ def glb_bytes(meshes: Sequence[MeshPart], materials: Sequence[Material],
             entry["matrix"] = node_matrix_yup(node.T_world_node)
         b.doc["nodes"].append(entry)
         b.doc["scenes"][0]["nodes"].append(len(b.doc["nodes"]) - 1)
+    root_at(b, origin)
     return pack_glb(b)
+
+
+def root_at(b: _Builder, origin: np.ndarray) -> None:
+    """Put the scene's top nodes under a new root node "origin" translated to ``origin`` (3,) (world,
+    Z up; written Y up as float64 JSON); nothing when ``origin`` is zero."""
+    top = b.doc["scenes"][0]["nodes"]
+    if not origin.any() or not top:
+        return
+    b.doc["nodes"].append({"name": "origin", "translation": [float(x) for x in C_YUP_ZUP @ origin],
+                           "children": list(top)})
+    b.doc["scenes"][0]["nodes"] = [len(b.doc["nodes"]) - 1]
 
 
 def pack_glb(b: _Builder) -> bytes:

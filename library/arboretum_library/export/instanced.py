@@ -10,7 +10,10 @@ Two variants of the same content:
 
 Transforms are world (Z up) similarities ``T = [s R | t]`` mapping a mesh's own frame to the world. glTF is
 Y up, so with ``C`` the Z-up -> Y-up rotation the written transform is ``C T C^T``: translation ``C t``,
-rotation ``C R C^T`` (the frame is rotated, not only the positions), scale unchanged. numpy + stdlib only.
+rotation ``C R C^T`` (the frame is rotated, not only the positions), scale unchanged. The float32
+TRANSLATION accessors hold translations relative to ``parts.local_origin`` of the instances (zero near
+the world origin); the instancing nodes then hang under a root node "origin" translated (float64 JSON)
+by ``C`` times it. numpy + stdlib only.
 """
 
 from __future__ import annotations
@@ -21,8 +24,8 @@ import numpy as np
 
 from arboretum_library.errors import ValidationError
 
-from .gltf import C_YUP_ZUP, _Builder, _materials, _primitive, glb_bytes, pack_glb
-from .parts import Material, MeshPart, Node
+from .gltf import C_YUP_ZUP, _Builder, _materials, _primitive, glb_bytes, pack_glb, root_at
+from .parts import Material, MeshPart, Node, local_origin
 
 EXTENSION = "EXT_mesh_gpu_instancing"
 
@@ -73,9 +76,13 @@ def matrix_to_quat_xyzw(R: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
-def instance_trs_yup(T_world: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """glTF (Y up) translation (K, 3), rotation xyzw (K, 4) and scale (K, 3), all float32, of ``T_world``."""
+def instance_trs_yup(T_world: np.ndarray, origin: np.ndarray | None = None
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """glTF (Y up) translation (K, 3), rotation xyzw (K, 4) and scale (K, 3), all float32, of ``T_world``;
+    translations relative to ``origin`` (3,) (world, Z up) when given."""
     t, R, s = decompose_similarity(T_world)
+    if origin is not None:
+        t = t - origin
     C = C_YUP_ZUP
     t_y = t @ C.T
     R_y = C @ R @ C.T
@@ -106,7 +113,8 @@ def instanced_glb_bytes(meshes: Sequence[MeshPart], materials: Sequence[Material
     mesh_index = np.asarray(mesh_index, np.int64).reshape(-1)
     T_world = np.asarray(T_world, np.float64).reshape(-1, 4, 4)
     _check(meshes, mesh_index, T_world)
-    t, q, s = instance_trs_yup(T_world)
+    origin = local_origin(T_world[:, :3, 3])
+    t, q, s = instance_trs_yup(T_world, origin)
     b = _Builder()
     _materials(b, materials)
     for m in np.unique(mesh_index):
@@ -121,6 +129,7 @@ def instanced_glb_bytes(meshes: Sequence[MeshPart], materials: Sequence[Material
         b.doc["nodes"].append({"mesh": len(b.doc["meshes"]) - 1, "name": f"{part.name}_instances",
                                "extensions": {EXTENSION: {"attributes": attrs}}})
         b.doc["scenes"][0]["nodes"].append(len(b.doc["nodes"]) - 1)
+    root_at(b, origin)
     if b.doc["nodes"]:
         b.doc["extensionsUsed"] = [EXTENSION]
         b.doc["extensionsRequired"] = [EXTENSION]

@@ -1,7 +1,9 @@
 """What the writers take: triangle meshes as plain arrays, materials, and nodes that place meshes.
 
 Everything is in the world frame (right-handed, Z up, metres); each writer converts to its format's
-frame (glTF: Y up).
+frame (glTF: Y up). Formats store positions as float32, which at UTM coordinates (5.4e6 m) resolves
+only 0.5 m: the writers store them relative to ``local_origin`` and put that offset, in float64, on a
+root node (glTF) or prim (USD).
 """
 
 from __future__ import annotations
@@ -11,6 +13,23 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from arboretum_library.errors import ValidationError
+
+FAR = 128.0
+"""A scene whose bounding-box centre lies farther than this (m, in any coordinate) from the world origin
+is written relative to ``local_origin``; nearer ones as they are (float32 resolves 8 µm at 128 m)."""
+
+
+def local_origin(points: np.ndarray) -> np.ndarray:
+    """(3,) float64, metres: where a writer puts its scene's origin for world ``points`` (N, 3) (Z up).
+
+    The centre of their bounding box rounded to whole metres, or (0, 0, 0) when that centre is within
+    ``FAR`` of the world origin (or there are no points).
+    """
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    if not len(p):
+        return np.zeros(3)
+    centre = (p.min(0) + p.max(0)) / 2
+    return np.round(centre) + 0.0 if np.abs(centre).max() > FAR else np.zeros(3)
 
 
 @dataclass(frozen=True, eq=False)

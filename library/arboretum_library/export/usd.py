@@ -2,10 +2,12 @@
 
 The stage is Z up (``UsdGeom.SetStageUpAxis(stage, Z)``) with ``metersPerUnit = 1``, so world transforms
 are written as they are: per instance ``positions`` (float3), ``orientationsf`` (float quaternions; full
-float32 precision) and ``scales`` (float3, uniform), ``protoIndices`` (int). ``pxr`` (usd-core) is imported
-inside the functions, so this module imports without it. Layout::
+float32 precision) and ``scales`` (float3, uniform), ``protoIndices`` (int). Points and positions are
+float32, so a scene far from the origin (UTM, geocentric) is written relative to ``parts.local_origin``
+and /Tree gets a double-precision ``xformOp:translate`` to it (none near the origin). ``pxr``
+(usd-core) is imported inside the functions, so this module imports without it. Layout::
 
-    /Tree                      Xform (default prim)
+    /Tree                      Xform (default prim; translated to the local origin when far)
     /Tree/Instancer            PointInstancer
     /Tree/Instancer/Prototypes/<mesh name>   Mesh (one per prototype, not drawn on its own)
 """
@@ -23,7 +25,7 @@ import numpy as np
 from arboretum_library.errors import InputError, ValidationError
 
 from .instanced import decompose_similarity, matrix_to_quat_xyzw
-from .parts import MeshPart
+from .parts import MeshPart, local_origin
 
 USD_FORMATS = (".usdc", ".usda", ".usd")
 
@@ -48,10 +50,12 @@ def _prim_name(name: str, used: set[str]) -> str:
     return out
 
 
-def _define_mesh(stage, path: str, part: MeshPart):
+def _define_mesh(stage, path: str, part: MeshPart, origin: np.ndarray | None = None):
+    """A Mesh prim at ``path`` with ``part``'s triangles, its points relative to ``origin`` (3,) if given."""
     _, _, _, UsdGeom, Vt = _pxr()
     mesh = UsdGeom.Mesh.Define(stage, path)
-    pts = np.asarray(part.positions, np.float32)
+    pts = part.positions if origin is None or not origin.any() else part.positions - origin
+    pts = np.asarray(pts, np.float32)
     mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(pts))
     mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(part.faces), 3, np.int32)))
     mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(part.faces.astype(np.int32).reshape(-1)))
@@ -70,6 +74,15 @@ def _new_stage(path: Path):
     root = UsdGeom.Xform.Define(stage, "/Tree")
     stage.SetDefaultPrim(root.GetPrim())
     return stage
+
+
+def _translate_root(stage, origin: np.ndarray) -> None:
+    """Give /Tree a double-precision translate to ``origin`` (3,) (nothing when it is zero)."""
+    if not origin.any():
+        return
+    Gf, _, _, UsdGeom, _ = _pxr()
+    op = UsdGeom.Xform(stage.GetPrimAtPath("/Tree")).AddTranslateOp(UsdGeom.XformOp.PrecisionDouble)
+    op.Set(Gf.Vec3d(*(float(x) for x in origin)))
 
 
 def _save_atomic(path: str | os.PathLike, fill) -> int:
@@ -106,9 +119,11 @@ def write_usd_instanced(path: str | os.PathLike, meshes: Sequence[MeshPart], mes
         raise ValidationError(f"instances: mesh indices must lie in 0..{len(meshes) - 1}")
     t, R, s = decompose_similarity(T_world)
     q = matrix_to_quat_xyzw(R)
+    origin = local_origin(t)
 
     def fill(stage) -> None:
         Gf, Sdf, _, UsdGeom, Vt = _pxr()
+        _translate_root(stage, origin)
         inst = UsdGeom.PointInstancer.Define(stage, "/Tree/Instancer")
         stage.DefinePrim("/Tree/Instancer/Prototypes", "Scope")
         used: set[str] = set()
@@ -119,7 +134,7 @@ def write_usd_instanced(path: str | os.PathLike, meshes: Sequence[MeshPart], mes
             targets.append(Sdf.Path(p))
         inst.CreatePrototypesRel().SetTargets(targets)
         inst.CreateProtoIndicesAttr(Vt.IntArray.FromNumpy(mesh_index.astype(np.int32)))
-        inst.CreatePositionsAttr(Vt.Vec3fArray.FromNumpy(t.astype(np.float32)))
+        inst.CreatePositionsAttr(Vt.Vec3fArray.FromNumpy((t - origin).astype(np.float32)))
         inst.CreateOrientationsfAttr(Vt.QuatfArray([Gf.Quatf(float(w), float(x), float(y), float(z))
                                                     for x, y, z, w in q]))
         inst.CreateScalesAttr(Vt.Vec3fArray.FromNumpy(np.repeat(s[:, None], 3, 1).astype(np.float32)))
@@ -129,18 +144,26 @@ def write_usd_instanced(path: str | os.PathLike, meshes: Sequence[MeshPart], mes
 
 def write_usd_mesh(path: str | os.PathLike, part: MeshPart) -> int:
     """Write one flat mesh (world frame, Z up) as /Tree/Mesh; returns the file size in bytes."""
-    return _save_atomic(path, lambda stage: _define_mesh(stage, "/Tree/Mesh", part))
+    origin = local_origin(part.positions)
+
+    def fill(stage) -> None:
+        _translate_root(stage, origin)
+        _define_mesh(stage, "/Tree/Mesh", part, origin)
+
+    return _save_atomic(path, fill)
 
 
 def read_usd_instancer(path: str | os.PathLike) -> dict[str, np.ndarray]:
-    """positions (K, 3), orientations wxyz (K, 4), scales (K, 3), protoIndices (K,) of /Tree/Instancer."""
+    """World positions (K, 3), orientations wxyz (K, 4), scales (K, 3), protoIndices (K,) of
+    /Tree/Instancer (positions include /Tree's translate; any rotation or scale of /Tree is ignored)."""
     _, _, Usd, UsdGeom, _ = _pxr()
     stage = Usd.Stage.Open(str(path))
     inst = UsdGeom.PointInstancer(stage.GetPrimAtPath("/Tree/Instancer"))
     quats = inst.GetOrientationsfAttr().Get()
     wxyz = np.array([[q.GetReal(), *q.GetImaginary()] for q in quats], np.float64).reshape(-1, 4)
+    shift = np.array(inst.ComputeLocalToWorldTransform(Usd.TimeCode.Default()).ExtractTranslation())
     return {
-        "positions": np.asarray(inst.GetPositionsAttr().Get(), np.float64).reshape(-1, 3),
+        "positions": np.asarray(inst.GetPositionsAttr().Get(), np.float64).reshape(-1, 3) + shift,
         "orientations": wxyz,
         "scales": np.asarray(inst.GetScalesAttr().Get(), np.float64).reshape(-1, 3),
         "protoIndices": np.asarray(inst.GetProtoIndicesAttr().Get(), np.int64),
