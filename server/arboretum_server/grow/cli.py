@@ -36,7 +36,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="growth radius D in metres (default: 1/6 of the median lobe radius; at least a quarter of "
                         "that, at most the largest lobe's radius)")
     p.add_argument("--leaf-size", type=float, default=None,
-                   help="leaf card length in metres (default: 1.2 x step)")
+                   help="leaf card length in metres (default: 1.2 x step); sets the size only, never the number "
+                        "of cards: bigger cards hang from the same twigs and overhang the lobes by up to their "
+                        "length")
     p.add_argument("--branch-radii", choices=("auto", "hbl", "pipe"), default="auto",
                    help="hbl: keep the HBL's branch radii and fit twigs under them; pipe: pipe model from "
                         "every tip to the root; auto (default): hbl when the HBL's radii are consistent")

@@ -14,18 +14,26 @@ from .radii import tip_heights
 from .skeleton import Leaves
 
 UP = np.array([0.0, 0.0, 1.0])
+DEFAULT_SIZE = 1.2
+"""Leaf card length in units of the growth radius D when ``leaf_size`` is None."""
 
 
 def place_leaves(positions: np.ndarray, parents: np.ndarray, lobe: np.ndarray,
                  lobes: Sequence[Lobe], index: HullIndex, opts: GrowOptions, step: float,
                  rng: np.random.Generator) -> Leaves:
-    """Cards on twig nodes within ``leaf_tip_depth`` hops of a tip; centres outside the hull are dropped.
+    """Cards on twig nodes within ``leaf_tip_depth`` hops of a tip, kept when their attachment lies in
+    the lobe hull.
 
     Each eligible node gets Poisson(leaf_density) cards (denser twigs make more eligible nodes). A card faces its lobe's outward
     direction tilted up (out + 0.6 up) plus Gaussian jitter of ``leaf_jitter``; its stem sits at the node
     and its length points along the twig (parent -> node) bent towards the facing plane, with jitter.
+    A card is kept when the centre a default-size card (``DEFAULT_SIZE`` D, times the card's own random
+    factor) would have lies inside its hull: at the default size that is the card's centre; a
+    ``leaf_size`` makes the same cards longer or shorter, never fewer (testing the centre of a 16 times
+    longer card dropped 94 % of them). Big cards therefore overhang the hull by up to their length.
     """
-    size = opts.leaf_size if opts.leaf_size is not None else 1.2 * step
+    base = DEFAULT_SIZE * step
+    size = opts.leaf_size if opts.leaf_size is not None else base
     twig = np.flatnonzero((lobe >= 0) & (parents >= 0))
     height = tip_heights(parents)
     node = twig[height[twig] <= opts.leaf_tip_depth]
@@ -38,9 +46,11 @@ def place_leaves(positions: np.ndarray, parents: np.ndarray, lobe: np.ndarray,
     along = _unit(positions[node] - positions[parents[node]]) + 0.8 * rng.normal(size=(k, 3))
     axis = along - (along * normal).sum(1, keepdims=True) * normal
     axis = _unit(np.where(np.linalg.norm(axis, axis=1, keepdims=True) < 1e-6, _any_perp(normal), axis))
-    sizes = size * rng.uniform(0.8, 1.2, k)
+    factor = rng.uniform(0.8, 1.2, k)
+    sizes = size * factor
     centres = positions[node] + axis * sizes[:, None] / 2
-    keep = inside(index, centres, lobe[node])
+    probe = centres if opts.leaf_size is None else positions[node] + axis * (base * factor)[:, None] / 2
+    keep = inside(index, probe, lobe[node])
     return Leaves(centres[keep], normal[keep], axis[keep], sizes[keep], lobe[node][keep])
 
 

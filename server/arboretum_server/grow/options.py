@@ -56,7 +56,8 @@ class GrowOptions:
     leaf_density: float = 1.0
     """Expected leaf cards per twig node near the tips (Poisson)."""
     leaf_size: float | None = None
-    """Leaf card length in metres. None: 1.2 × step."""
+    """Leaf card length in metres. None: 1.2 × step. Sets the cards' size only, never their number:
+    which cards are kept is decided at the default size (``leaves.place_leaves``)."""
     leaf_tip_depth: int = 3
     """Leaves grow on twig nodes at most this many nodes away from a tip."""
     leaf_jitter: float = 0.35
