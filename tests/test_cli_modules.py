@@ -2,16 +2,18 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
 import pygltflib
 import pytest
+import trimesh
 
 from arboretum_library.cli import main
 from arboretum_library.codec import save_record
 from arboretum_library.export.instanced import EXTENSION
-from arboretum_library.model import Assembly
+from arboretum_library.model import HBL, Assembly
 from arboretum_server.grow.demo import demo_hbl
 from arboretum_server.modules.meshio import save_obj
 from arboretum_server.modules.shapes import tetrahedron_mesh
@@ -23,6 +25,10 @@ def files(tmp_path_factory):
     save_obj(d / "crown.obj", *tetrahedron_mesh([0, 0, 4.5], 6.5))
     save_record(d / "hbl.npz", demo_hbl(np.random.default_rng(0), n_lobes=8))
     save_record(d / "assembly.npz", Assembly())
+    hbl = demo_hbl(np.random.default_rng(0), n_lobes=3)
+    lobes = tuple(dataclasses.replace(lb, branch=-1) for lb in hbl.lobes)
+    save_record(d / "nobranch.npz", HBL(root=hbl.root, branches=(), lobes=lobes))
+    trimesh.PointCloud(np.random.default_rng(1).normal(size=(500, 3))).export(d / "cloud.ply")
     return d
 
 
@@ -81,9 +87,14 @@ def test_tree_conversion(tmp_path, files, capsys):
     (["--tree", "CROWN", "--out", "OUT/t.glb"], "not a readable .npz"),
     (["--crown", "CROWN", "--out", "OUT/t.glb", "--types", "0"], "--types must be >= 1"),
     (["--assembly", "ASSEMBLY", "--out", "OUT/t.glb"], "needs --library LIB"),
+    (["--crown", "CLOUD", "--out", "OUT/t.glb"], "cloud.ply: has no triangles"),
+    (["--assembly", "NOBRANCH", "--out", "OUT/t.glb"], "nobranch.npz: has no branches"),
+    (["--tree", "HBL", "--out", "OUT/t.glb", "--modules", "/no/such/folder"], "--modules applies to --crown"),
+    (["--tree", "HBL", "--out", "OUT/t.glb", "--modules", "OUT"], "--modules applies to --crown"),
 ])
 def test_user_errors_are_one_line(tmp_path, files, capsys, argv, message):
-    names = {"CROWN": "crown.obj", "ASSEMBLY": "assembly.npz"}
+    names = {"CROWN": "crown.obj", "ASSEMBLY": "assembly.npz", "CLOUD": "cloud.ply", "NOBRANCH": "nobranch.npz",
+             "HBL": "hbl.npz"}
     argv = [str(files / names[a]) if a in names else a.replace("OUT", str(tmp_path)) for a in argv]
     assert main(["modules", *argv]) == 2
     err = capsys.readouterr().err

@@ -57,7 +57,10 @@ def _crown_mesh(path: str):
         mesh = trimesh.load(p, force="mesh", process=True)
     except Exception as exc:  # trimesh raises many types on malformed files
         raise InputError(f"--crown {p}: cannot be read ({exc})") from exc
-    return np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int32)
+    faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), np.int32).reshape(-1, 3)
+    if len(faces) == 0:
+        raise InputError(f"--crown {p}: has no triangles (a point cloud? give a closed mesh)")
+    return np.asarray(mesh.vertices, np.float64), faces
 
 
 def run(args: argparse.Namespace) -> int:
@@ -96,6 +99,9 @@ def _check_args(args: argparse.Namespace) -> str:
     check_input_file(source, flag)
     check_output(args.out, "--out", inputs=[source])
     suffix = check_format(args.out, args.plain_nodes)
+    if flag == "--tree" and args.modules is not None:
+        raise InputError("--modules applies to --crown and --assembly only (--tree makes its own module "
+                         "types from the grown tree; set their number with --types)")
     if args.types is not None and args.types < 1:
         raise InputError("--types must be >= 1")
     check_seed(args.seed)
@@ -126,9 +132,8 @@ def _converted(args: argparse.Namespace):
 def _grown(args: argparse.Namespace):
     import numpy as np
 
-    from .crown import crown_from_meshes
     from .export import from_modular_tree
-    from .grow import grow_modular_tree
+    from .fit import grow_in_crown, reach_note
     from .options import ModularTreeOptions
     from .report import constraint_report
 
@@ -138,47 +143,36 @@ def _grown(args: argparse.Namespace):
         lo = meshes[0][0].min(axis=0)
         root = np.r_[(lo + meshes[0][0].max(axis=0))[:2] / 2, min(lo[2], 0.0)]
     else:
-        from arboretum_server.assembly.world import load_structure
+        meshes, root = _assembly_crown(args.assembly, args.library)
+    tree, scaled, k = grow_in_crown(modules, meshes, root, ModularTreeOptions(),
+                                    np.random.default_rng(args.seed))
+    note = reach_note(tree.stats.reached_fraction)
+    return from_modular_tree(tree, scaled), {
+        "source": "crown" if args.crown else "assembly", "module_scale": k,
+        "constraints": constraint_report(tree), "notes": [note] if note else []}
 
-        hbl = load_structure(args.assembly, args.library)
-        if not hbl.lobes:
-            raise InputError(f"--assembly {args.assembly}: has no lobes (no crown to grow in)")
-        meshes = [(lb.hull_vertices, lb.hull_faces) for lb in hbl.lobes]
-        root = np.asarray(hbl.branches[0].points[0], np.float64)
-    crown = crown_from_meshes(meshes)
-    T0 = trunk_transform(modules, crown, root)
-    tree = grow_modular_tree(modules, crown, ModularTreeOptions(), np.random.default_rng(args.seed),
-                             T_world_trunk=T0)
-    return from_modular_tree(tree, modules), {
-        "source": "crown" if args.crown else "assembly", "constraints": constraint_report(tree)}
+
+def _assembly_crown(path: str, library: str | None):
+    """The lobe hulls [(V, 3), (F, 3)] of the record at ``path`` and its trunk position (3,)."""
+    from arboretum_server.assembly.world import load_structure
+
+    from .fit import hbl_crown
+
+    return hbl_crown(load_structure(path, library), f"--assembly {path}")
 
 
 def _module_set(folder: str | None, types: int | None):
-    from arboretum_library.assets import asset_path
-
+    from .fit import default_module_set
     from .moduleset import load_module_set
 
-    path = Path(folder) if folder else asset_path("modules", "default")
-    if not path.is_dir():
-        raise InputError(f"--modules {path}: not a folder")
-    modules = load_module_set(path)
+    if folder is None:
+        modules = default_module_set()
+    elif not Path(folder).is_dir():
+        raise InputError(f"--modules {folder}: not a folder")
+    else:
+        modules = load_module_set(folder)
     if types is None:
         return modules
     keep = [m.name for m in modules.modules if m.is_trunk]
     keep += [m.name for m in modules.modules if not m.is_trunk][:types]
     return modules.subset(keep)
-
-
-def trunk_transform(modules, crown, root):
-    """(4, 4) trunk placement: base at ``root`` (3,), upright, scaled so its top reaches a third of the
-    way up the crown (scale clamped to 0.5-3)."""
-    import numpy as np
-
-    from arboretum_library.geometry import make_transform
-
-    trunks = modules.trunk_indices
-    trunk = modules.modules[int(trunks[0] if len(trunks) else modules.branch_indices[0])]
-    lo, hi = crown.bounds[0, 2], crown.bounds[1, 2]
-    target = lo + (hi - lo) / 3 - root[2]
-    scale = float(np.clip(target / max(trunk.vertices[:, 2].max(), 1e-9), 0.5, 3.0))
-    return make_transform(None, root, scale)

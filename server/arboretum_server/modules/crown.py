@@ -1,6 +1,7 @@
 """Crown shapes: closed meshes -> a signed distance field on a grid (inside negative), trilinear lookup.
 
-Inside/outside by ray parity along +X, one ray per grid row (vectorised over rows and triangles).
+Inside/outside by ray parity along +X, one ray per grid row; each triangle is tested against the rows in
+its (y, z) box only, in bounded blocks (memory does not grow with the triangle count).
 Distance: exact (dense deterministic surface samples, cKDTree) within 3 cells of the surface, the
 Euclidean distance transform of the inside mask further away (error under one cell). A union of meshes takes
 the minimum of their fields, so overlapping parts are handled.
@@ -45,26 +46,54 @@ def crown_sdf(crown: Crown, points: np.ndarray) -> np.ndarray:
     return map_coordinates(crown.values, q.T, order=1, mode="nearest", prefilter=False) + gap
 
 
-def _inside_grid(vertices, faces, xs, ys, zs) -> np.ndarray:
-    """(nx, ny, nz) bool: ray parity along +X for every (y, z) grid row."""
+def _row_ranges(lo, hi, q) -> tuple[np.ndarray, np.ndarray]:
+    """First and one-past-last index of the sorted samples ``q`` within [lo, hi] (per triangle, padded)."""
+    pad = 1e-9 * max(float(q[-1] - q[0]), 1.0) if len(q) else 0.0
+    return np.searchsorted(q, lo - pad, side="left"), np.searchsorted(q, hi + pad, side="right")
+
+
+def _blocks(counts: np.ndarray, block: int) -> list[np.ndarray]:
+    """Consecutive triangle index blocks whose candidate-row counts sum to about ``block`` (at least one each)."""
+    ends = np.searchsorted(np.cumsum(counts), np.arange(block, int(counts.sum()) + block, block), side="right")
+    ends = np.unique(np.r_[np.clip(ends, 1, len(counts)), len(counts)])
+    return [np.arange(s, e) for s, e in zip(np.r_[0, ends[:-1]], ends) if e > s]
+
+
+def _inside_grid(vertices, faces, xs, ys, zs, block: int = 1 << 19) -> np.ndarray:
+    """(nx, ny, nz) bool: ray parity along +X for every (y, z) grid row.
+
+    Each triangle is tested only against the rows inside its (y, z) box, in blocks of about ``block``
+    (triangle, row) pairs, so memory stays bounded (~100 MB) whatever the triangle count; a hit at x
+    crosses every sample with xs > x, counted per row with a histogram and a cumulative sum.
+    """
     tri = vertices[faces]
-    yy, zz = np.meshgrid(ys + 1.234567e-7, zs + 7.654321e-8, indexing="ij")
-    qy, qz = yy.ravel()[:, None], zz.ravel()[:, None]
+    qy, qz = ys + 1.234567e-7, zs + 7.654321e-8
     a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
     den = (b[:, 1] - a[:, 1]) * (c[:, 2] - a[:, 2]) - (c[:, 1] - a[:, 1]) * (b[:, 2] - a[:, 2])
     ok = np.abs(den) > 1e-300
-    a, b, c, den = a[ok], b[ok], c[ok], den[ok]
-    inside = np.zeros((len(xs), len(ys) * len(zs)), dtype=bool)
-    for start in range(0, len(qy), 256):
-        py, pz = qy[start : start + 256], qz[start : start + 256]
-        l1 = ((b[:, 1] - py) * (c[:, 2] - pz) - (c[:, 1] - py) * (b[:, 2] - pz)) / den
-        l2 = ((c[:, 1] - py) * (a[:, 2] - pz) - (a[:, 1] - py) * (c[:, 2] - pz)) / den
+    a, b, c, den, tri = a[ok], b[ok], c[ok], den[ok], tri[ok]
+    y0, y1 = _row_ranges(tri[:, :, 1].min(axis=1), tri[:, :, 1].max(axis=1), qy)
+    z0, z1 = _row_ranges(tri[:, :, 2].min(axis=1), tri[:, :, 2].max(axis=1), qz)
+    nzs = np.maximum(z1 - z0, 0)
+    counts = np.maximum(y1 - y0, 0) * nzs
+    nx, nz = len(xs), len(zs)
+    hist = np.zeros(len(ys) * nz * (nx + 1), dtype=np.int64)
+    for f in _blocks(counts, block) if counts.sum() else []:
+        n = counts[f]
+        f = np.repeat(f, n)
+        r = np.arange(len(f)) - np.repeat(np.cumsum(n) - n, n)  # pair's place in its triangle's rows
+        iy, iz = y0[f] + r // nzs[f], z0[f] + r % nzs[f]
+        py, pz = qy[iy], qz[iz]
+        A, B, C, D = a[f], b[f], c[f], den[f]
+        l1 = ((B[:, 1] - py) * (C[:, 2] - pz) - (C[:, 1] - py) * (B[:, 2] - pz)) / D
+        l2 = ((C[:, 1] - py) * (A[:, 2] - pz) - (A[:, 1] - py) * (C[:, 2] - pz)) / D
         l3 = 1 - l1 - l2
         hit = (l1 >= 0) & (l2 >= 0) & (l3 >= 0)
-        xhit = np.where(hit, l1 * a[:, 0] + l2 * b[:, 0] + l3 * c[:, 0], np.inf)
-        crossings = (xhit[:, None, :] < xs[None, :, None]).sum(axis=2)
-        inside[:, start : start + 256] = (crossings % 2 == 1).T
-    return inside.reshape(len(xs), len(ys), len(zs))
+        x = l1[hit] * A[hit, 0] + l2[hit] * B[hit, 0] + l3[hit] * C[hit, 0]
+        row = iy[hit] * nz + iz[hit]
+        hist += np.bincount(row * (nx + 1) + np.searchsorted(xs, x, side="right"), minlength=len(hist))
+    crossings = np.cumsum(hist.reshape(-1, nx + 1)[:, :nx], axis=1)
+    return (crossings % 2 == 1).T.reshape(nx, len(ys), nz)
 
 
 def _surface_samples(vertices, faces, step: float) -> np.ndarray:

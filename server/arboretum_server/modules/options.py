@@ -1,7 +1,8 @@
 """Options of the modular-tree growth, with the defaults and symbols of Takikawa et al. (GI 2025).
 
-Lengths given as fractions are relative to the largest axis of the bounding box of trunk and crown
-(the paper's scene units do not transfer; see docs/modules.md).
+Lengths given as fractions are relative to the largest axis of the bounding box of trunk and crown, as in
+the paper (its scene units do not transfer; see docs/modules.md). ``fit.py`` scales the module set and the
+trunk to the crown, so that box, and every distance, follows the crown's size.
 """
 
 from __future__ import annotations

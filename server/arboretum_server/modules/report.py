@@ -44,7 +44,7 @@ def constraint_report(tree: ModularTree) -> dict[str, Any]:
 
 
 def describe(data: dict[str, Any]) -> str:
-    """One human line for the CLI."""
+    """The human summary for the CLI: one line, plus one ``note:`` line per entry of ``data["notes"]``."""
     text = (f"wrote {data['out']} ({data['bytes']} bytes): {data['modules_placed']} modules of "
             f"{data['types_used']} types, {data['triangles']} triangles; flat mesh {data['flat_bytes']} bytes "
             f"(1:{data['compression']:.0f})")
@@ -54,4 +54,6 @@ def describe(data: dict[str, Any]) -> str:
         text += f"; {bad} constraint violations, {100 * c['reached_fraction']:.0f}% attraction points reached"
     if "chamfer_fraction" in data:
         text += f"; Chamfer {100 * data['chamfer_fraction']:.3f}% of height"
+    for note in data.get("notes", ()):
+        text += f"\nnote: {note}"
     return text

@@ -1,5 +1,7 @@
 """Export as modules (Takikawa et al. 2025, ``arboretum_server.modules``) as a job: the assembled tree's
-lobe hulls make the crown, the default module set grows in it, and the placed module instances are
+lobe hulls make the crown, the default module set (``assets/modules/default``, as ``arboretum modules``
+uses) is scaled to it and grows in it from the same trunk placement as the CLI's (``modules.fit``:
+``grow_in_crown``, the same tree for the same seed), and the placed module instances are
 written by ``modules.export`` in the format asked for: ``glb`` (plain nodes sharing one mesh per module
 type: every importer reads those), ``glb-instanced`` (EXT_mesh_gpu_instancing), ``usdc`` or ``usda``
 (a UsdGeom.PointInstancer)."""
@@ -39,21 +41,20 @@ def export_modules_job(progress, hbl: HBL, seed: int, options: dict, format: str
     import tempfile
     from pathlib import Path
 
-    from arboretum_server.modules.crown import crown_from_meshes
     from arboretum_server.modules.export import from_modular_tree, write_instances
-    from arboretum_server.modules.grow import grow_modular_tree
-    from arboretum_server.modules.procedural import make_default_module_set
+    from arboretum_server.modules.fit import (
+        default_module_set,
+        grow_in_crown,
+        hbl_crown,
+        reach_note,
+    )
 
-    if not hbl.lobes:
-        raise InputError("export modules: the assembled tree has no lobes to make a crown from")
-    rng = np.random.default_rng(seed)
-    progress(0, 3, "crown")
-    crown = crown_from_meshes([(lb.hull_vertices, lb.hull_faces) for lb in hbl.lobes])
-    modules = make_default_module_set(rng)
+    meshes, root = hbl_crown(hbl, "export modules: the assembled tree")
+    opts = module_options(options)
+    progress(0, 3, "module set")
+    modules = default_module_set()
     progress(1, 3, "growing modules")
-    T = np.eye(4)
-    T[:3, 3] = hbl.root
-    tree = grow_modular_tree(modules, crown, module_options(options), rng, T_world_trunk=T)
+    tree, modules, k = grow_in_crown(modules, meshes, root, opts, np.random.default_rng(seed))
     progress(2, 3, "writing")
     suffix, plain = FORMATS[format]
     name = f"tree-modules{suffix}"
@@ -63,7 +64,8 @@ def export_modules_job(progress, hbl: HBL, seed: int, options: dict, format: str
         data = path.read_bytes()
     progress(3, 3, "done")
     stats = {"instances": int(len(tree.module)), "types": int(tree.stats.types_used),
-             "reached_fraction": float(tree.stats.reached_fraction)}
+             "reached_fraction": float(tree.stats.reached_fraction), "module_scale": k,
+             "notes": [n for n in [reach_note(tree.stats.reached_fraction)] if n]}
     return {"name": name, "data": np.frombuffer(data, np.uint8), "stats": stats}
 
 

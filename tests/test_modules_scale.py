@@ -1,0 +1,138 @@
+"""``arboretum modules`` at any crown size: modules and trunk follow the crown, the reach is told truthfully.
+
+The same crown shape at 0.2 m, 8 m or 200 m must give the same tree, scaled (the paper's lengths are in
+scene units); the trunk's top a third of the way up the crown; a sparsely filled crown gets a note.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pygltflib
+import pytest
+
+from arboretum_library.cli import main
+from arboretum_library.codec import load_record, save_record
+from arboretum_library.export.instanced import EXTENSION
+from arboretum_library.model import HBL
+from arboretum_server.modules.meshio import save_obj
+from arboretum_server.modules.shapes import sphere_mesh
+
+SCAN = "assets/scans/01_rtwig_coffeetree/01_rtwig_coffeetree.xyz"
+
+
+def _modules(argv: list[str], capsys) -> dict:
+    assert main(["modules", *argv, "--json"]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def _trunk_top(glb) -> tuple[float, float]:
+    """(top, base) height (Z up) of the trunk instance of an EXT_mesh_gpu_instancing GLB (Y up)."""
+    g = pygltflib.GLTF2().load(str(glb))
+    blob = g.binary_blob()
+
+    def acc(i: int) -> np.ndarray:
+        a = g.accessors[i]
+        v = g.bufferViews[a.bufferView]
+        width = {"VEC3": 3, "VEC4": 4}[a.type]
+        return np.frombuffer(blob, np.float32, a.count * width, v.byteOffset + (a.byteOffset or 0)).reshape(-1, width)
+
+    k = next(i for i, n in enumerate(g.nodes) if n.mesh is not None and g.meshes[n.mesh].name.startswith("trunk"))
+    node = g.nodes[k]
+    attrs = node.extensions[EXTENSION]["attributes"]
+    offset = sum(np.asarray(p.translation or [0.0] * 3) for p in g.nodes if k in (p.children or []))  # recentring
+    t, s = acc(attrs["TRANSLATION"])[0] + offset, acc(attrs["SCALE"])[0]
+    top_y = g.accessors[g.meshes[node.mesh].primitives[0].attributes.POSITION].max[1]
+    return float(t[1] + s[1] * top_y), float(t[1])
+
+
+def _scaled_hbl(h: HBL, k: float) -> HBL:
+    from dataclasses import replace
+
+    branches = tuple(replace(b, points=b.points * k, radii=b.radii * k) for b in h.branches)
+    lobes = tuple(replace(lb, points=lb.points * k, hull_vertices=lb.hull_vertices * k, centre=lb.centre * k)
+                  for lb in h.lobes)
+    return replace(h, root=h.root * k, branches=branches, lobes=lobes, points=h.points * k)
+
+
+@pytest.mark.parametrize("radius", [0.1, 100.0])
+def test_a_sphere_crown_gives_the_same_tree_at_any_size(tmp_path, capsys, radius):
+    """Sphere of radius 3 m at z = 6 m (reference) against the same shape at r = 0.1 m and r = 100 m."""
+    s = {}
+    for r in (3.0, radius):
+        v, f = sphere_mesh([0, 0, 2 * r], r)
+        save_obj(tmp_path / f"c{r}.obj", v, f)
+        lo, hi = np.round(v[:, 2], 5).min(), np.round(v[:, 2], 5).max()  # as written to the OBJ
+        s[r] = _modules(["--crown", str(tmp_path / f"c{r}.obj"), "--out", str(tmp_path / f"t{r}.glb"),
+                         "--seed", "1"], capsys)
+        top, base = _trunk_top(tmp_path / f"t{r}.glb")
+        assert base == pytest.approx(0.0, abs=1e-6 * r)
+        assert top == pytest.approx(lo + (hi - lo) / 3, rel=1e-4)  # a third of the way up the crown
+    ref, other = s[3.0], s[radius]
+    assert ref["modules_placed"] > 50 and ref["constraints"]["reached_fraction"] > 0.85
+    assert 0.8 < other["modules_placed"] / ref["modules_placed"] < 1.25
+    assert other["constraints"]["reached_fraction"] > 0.85 and not other["notes"]
+    assert other["module_scale"] / ref["module_scale"] == pytest.approx(radius / 3.0)
+
+
+@pytest.fixture(scope="module")
+def coffee(tmp_path_factory):
+    """The documented pipeline: ``decompose`` at the default 0.8 m, and the same tree at 8 m and 0.08 m."""
+    d = tmp_path_factory.mktemp("coffee")
+    assert main(["decompose", SCAN, "--save-hbl", str(d / "c0.8.npz"), "--seed", "1", "--json"]) == 0
+    h = load_record(d / "c0.8.npz", HBL)
+    for k in (10, 0.1):
+        save_record(d / f"c{0.8 * k:g}.npz", _scaled_hbl(h, k))
+    return d
+
+
+def test_a_decomposed_tree_gives_the_same_modular_tree_at_any_size(tmp_path, coffee, capsys):
+    runs = {}
+    for size in ("0.8", "8", "0.08"):
+        out = tmp_path / f"m{size}.glb"
+        runs[size] = _modules(["--assembly", str(coffee / f"c{size}.npz"), "--out", str(out), "--seed", "2"],
+                              capsys)
+        h = load_record(coffee / f"c{size}.npz", HBL)
+        z = np.concatenate([lb.hull_vertices[:, 2] for lb in h.lobes])
+        top, base = _trunk_top(out)
+        assert base == pytest.approx(h.branches[0].points[0][2], abs=1e-5 * float(size))
+        assert top == pytest.approx(z.min() + (z.max() - z.min()) / 3, rel=1e-3)
+    counts = [r["modules_placed"] for r in runs.values()]
+    assert min(counts) >= 10 and max(counts) <= 1.25 * min(counts)
+    reached = [r["constraints"]["reached_fraction"] for r in runs.values()]
+    assert max(reached) - min(reached) < 0.1
+
+
+def test_a_poorly_filled_crown_says_so(tmp_path, coffee, capsys):
+    """The coffee tree's 40 small, separate lobe hulls are filled sparsely: a note, not a success line."""
+    out = tmp_path / "m.glb"
+    s = _modules(["--assembly", str(coffee / "c0.8.npz"), "--out", str(out), "--seed", "2"], capsys)
+    reached = s["constraints"]["reached_fraction"]
+    assert reached < 0.5 and len(s["notes"]) == 1 and f"only {100 * reached:.0f}%" in s["notes"][0]
+    assert main(["modules", "--assembly", str(coffee / "c0.8.npz"), "--out", str(out), "--seed", "2"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 2 and lines[1].startswith("note: only ")
+
+
+def test_the_fitted_trunk_does_not_reach_a_small_crown_alone():
+    """d_k is a fraction of the trunk-and-crown box (paper); with the trunk fitted to a 0.2 m crown it is
+    small, so the trunk alone reaches few attraction points (before: the 3.4 m trunk at scale >= 0.5 made
+    d_k larger than the crown, "100 % reached" by the trunk alone)."""
+    from arboretum_server.modules.fit import default_module_set, grow_in_crown
+    from arboretum_server.modules.options import ModularTreeOptions
+
+    v, f = sphere_mesh([0, 0, 0.2], 0.1)
+    opt = ModularTreeOptions(max_iterations=0)
+    tree, modules, k = grow_in_crown(default_module_set(), [(v, f)], [0, 0, 0], opt, np.random.default_rng(1))
+    assert tree.stats.modules_placed == 1 and 0.005 < k < 0.05
+    T = tree.T_world_module[0]
+    trunk = modules.modules[int(tree.module[0])]
+    world = trunk.vertices @ T[:3, :3].T + T[:3, 3]
+    top = world[:, 2].max()
+    assert top == pytest.approx(v[:, 2].min() + np.ptp(v[:, 2]) / 3, rel=1e-9)
+    skeleton = trunk.skeleton.points @ T[:3, :3].T + T[:3, 3]
+    d = np.linalg.norm(tree.attraction_points[:, None] - skeleton[None], axis=2).min(axis=1)
+    d_kill = opt.kill_fraction * float(np.ptp(np.concatenate([world, v]), axis=0).max())
+    np.testing.assert_array_equal(tree.reached, d <= d_kill)
+    assert tree.stats.reached_fraction < 0.2
