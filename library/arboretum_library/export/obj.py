@@ -1,22 +1,33 @@
-"""Wavefront OBJ + MTL writer over plain arrays; textures are written beside the files.
+"""Wavefront OBJ + MTL writer over plain arrays, with the textures written beside the files.
 
 OBJ has no frame of its own but most importers (Blender, Maya, three.js) read it as Y up, so the
-writer converts the world's Z up with ``geometry.zup_to_yup`` unless ``y_up=False``. OBJ's texture
+writer converts the world's Z up with ``geometry.zup_to_yup`` unless ``y_up=False``; the first line
+says which (``# arboretum OBJ (Y up, metres)``) and ``obj_up_axis`` reads it back. OBJ's texture
 origin is the image's bottom-left, so v is flipped from the glTF convention of ``MeshPart.uv``.
+
+The sidecars are named after the OBJ's stem (``tree.obj`` -> ``tree.mtl``, ``tree_bark.png``,
+``tree_leaf.png``) so two exports in one folder do not overwrite each other. Existing files that
+Arboretum did not write are refused, and all files go to temporary names first and are renamed only
+once every one is written (the .obj last), so an interrupt leaves no partial set.
 """
 
 from __future__ import annotations
 
 import os
+import re
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
+from arboretum_library.errors import InputError
 from arboretum_library.geometry import zup_to_yup
 
-from .gltf import write_atomic
 from .parts import Material, MeshPart
+
+MTL_HEADER = "# arboretum MTL\n"
+_UP = re.compile(r"\b([yz])[ -]up\b", re.IGNORECASE)
 
 
 def _rows(fmt: str, arr: np.ndarray) -> str:
@@ -29,7 +40,9 @@ def _rows(fmt: str, arr: np.ndarray) -> str:
 
 def obj_text(meshes: Sequence[MeshPart], materials: Sequence[Material], mtl_name: str,
              y_up: bool = True) -> str:
-    """The OBJ text: one group per mesh, ``usemtl`` its material, faces as v/vt/vn triples."""
+    """The OBJ text: one group per mesh, ``usemtl`` its material, faces as v/vt/vn triples.
+
+    Positions are written with 6 decimals (1 µm at any magnitude: 16 digits at 1e7 m)."""
     out = [f"# arboretum OBJ ({'Y' if y_up else 'Z'} up, metres)\n", f"mtllib {mtl_name}\n"]
     offset = 1
     for part in meshes:
@@ -54,31 +67,113 @@ def obj_text(meshes: Sequence[MeshPart], materials: Sequence[Material], mtl_name
     return "".join(out)
 
 
-def mtl_text(materials: Sequence[Material]) -> str:
-    """The MTL text: diffuse colour, dissolve, and ``map_Kd`` / ``map_d`` for textured materials."""
-    out = ["# arboretum MTL\n"]
+def texture_file_name(stem: str, material: Material) -> str:
+    """The PNG file name of a textured ``material`` beside ``stem``.obj: 'tree_bark.png'."""
+    return f"{stem}_{material.texture_name or material.name + '.png'}"
+
+
+def mtl_text(materials: Sequence[Material], stem: str = "") -> str:
+    """The MTL text: diffuse colour, dissolve, and ``map_Kd`` / ``map_d`` for textured materials
+    (texture files named by ``texture_file_name(stem, ...)``, or the material's own name without a stem)."""
+    out = [MTL_HEADER]
     for m in materials:
         r, g, b, a = m.base_color
         out.append(f"newmtl {m.name}\nKd {r:.4f} {g:.4f} {b:.4f}\nKa 0 0 0\nKs 0 0 0\nd {a:.4f}\nillum 1\n")
         if m.texture_png is not None:
-            tex = m.texture_name or f"{m.name}.png"
+            tex = texture_file_name(stem, m) if stem else (m.texture_name or f"{m.name}.png")
             out.append(f"map_Kd {tex}\n")
             if m.alpha_cutoff is not None:
                 out.append(f"map_d {tex}\n")
     return "".join(out)
 
 
-def write_obj(path: str | os.PathLike, meshes: Sequence[MeshPart], materials: Sequence[Material],
-              y_up: bool = True) -> list[Path]:
-    """Write PATH.obj, PATH.mtl and each material's PNG beside them; returns the files written."""
+def obj_up_axis(path: str | os.PathLike) -> str:
+    """'y' or 'z': the up axis of the OBJ at ``path``.
+
+    Its leading comment lines decide ('Y up' / 'Z up', as this writer and ``save_obj`` put them);
+    module files from ``save_obj`` before it wrote that line start with '# Arboretum module' and are
+    Z up; anything else is Y up, as Blender, Maya and most OBJ exporters write it."""
+    with open(path, encoding="utf-8", errors="replace") as f:
+        for i, line in enumerate(f):
+            text = line.strip()
+            if text and not text.startswith("#") or i >= 64:
+                break
+            if (found := _UP.search(text)) is not None:
+                return found.group(1).lower()
+            if i == 0 and text.startswith("# Arboretum module"):
+                return "z"
+    return "y"
+
+
+def _ours(path: Path, data: bytes, owned: set[str]) -> bool:
+    """True when ``path`` may be replaced: absent, named by our previous MTL, or identical."""
+    if not path.exists() or path.name in owned:
+        return True
+    return path.is_file() and path.stat().st_size == len(data) and path.read_bytes() == data
+
+
+def _previous_sidecars(mtl: Path) -> set[str]:
+    """Texture names referenced by an Arboretum MTL at ``mtl``; InputError when a foreign one is there."""
+    if not mtl.exists():
+        return set()
+    try:
+        text = mtl.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        text = ""
+    if not text.startswith(MTL_HEADER):
+        raise InputError(f"{mtl}: exists and was not written by Arboretum; move it away or choose "
+                         f"another output name")
+    return {line.split(maxsplit=1)[1].strip() for line in text.splitlines()
+            if line.startswith(("map_Kd ", "map_d "))}
+
+
+def check_sidecars(path: str | os.PathLike, materials: Sequence[Material]) -> list[tuple[Path, bytes]]:
+    """The (file, PNG bytes) textures ``write_obj(path, ...)`` writes beside ``path``; InputError when
+    PATH.mtl or one of them exists and was not written by Arboretum (a CLI may call this before long
+    work to fail early)."""
     path = Path(path)
-    mtl = path.with_suffix(".mtl")
-    written = []
+    owned = _previous_sidecars(path.with_suffix(".mtl"))
+    files: list[tuple[Path, bytes]] = []
     for m in materials:
         if m.texture_png is not None:
-            tex = path.parent / (m.texture_name or f"{m.name}.png")
-            write_atomic(tex, m.texture_png)
-            written.append(tex)
-    write_atomic(mtl, mtl_text(materials).encode())
-    write_atomic(path, obj_text(meshes, materials, mtl.name, y_up).encode())
-    return [path, mtl, *written]
+            tex = path.parent / texture_file_name(path.stem, m)
+            if not _ours(tex, m.texture_png, owned):
+                raise InputError(f"{tex}: exists and was not written by Arboretum for {path.name}; "
+                                 f"move it away or choose another output name")
+            files.append((tex, m.texture_png))
+    return files
+
+
+def write_all(files: Sequence[tuple[Path, bytes]]) -> None:
+    """Write every (path, data) to a temporary file beside it, then rename them in order (the last
+    one last); on any error or interrupt before the renames, every temporary file is removed."""
+    temps: list[str] = []
+    umask = os.umask(0)
+    os.umask(umask)
+    try:
+        for path, data in files:
+            fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+            temps.append(tmp)
+            with os.fdopen(fd, "wb") as f:
+                f.write(data)
+            os.chmod(tmp, 0o666 & ~umask)
+        for (path, _), tmp in zip(files, temps):
+            os.replace(tmp, path)
+    except BaseException:
+        for tmp in temps:
+            Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_obj(path: str | os.PathLike, meshes: Sequence[MeshPart], materials: Sequence[Material],
+              y_up: bool = True) -> list[Path]:
+    """Write PATH.obj, PATH.mtl and each textured material's PNG as PATH-stem_NAME.png beside them;
+    returns the files written (the .obj first). InputError, before anything is written, when one of
+    the sidecars exists and was not written by Arboretum."""
+    path = Path(path)
+    mtl = path.with_suffix(".mtl")
+    files = check_sidecars(path, materials)
+    files.append((mtl, mtl_text(materials, path.stem).encode()))
+    files.append((path, obj_text(meshes, materials, mtl.name, y_up).encode()))
+    write_all(files)
+    return [path, mtl, *(p for p, _ in files[:-2])]

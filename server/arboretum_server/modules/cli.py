@@ -25,7 +25,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "EXT_mesh_gpu_instancing (or plain nodes), .usdc/.usda with a UsdGeom.PointInstancer.",
     )
     src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--crown", metavar="MESH", help="closed crown mesh (.obj, .ply, .glb, .gltf; Z up, metres)")
+    src.add_argument("--crown", metavar="MESH", help="closed crown mesh in metres: .obj (Y up unless its "
+                     "header says Z up), .ply (Z up), .glb/.gltf (Y up)")
     src.add_argument("--assembly", metavar="A", help="record .npz (HBL, or Assembly with --library): the "
                      "union of its lobe hulls is the crown, its main branch base the trunk position")
     src.add_argument("--tree", metavar="TREE", help="record .npz (HBL, or Assembly with --library): grown "

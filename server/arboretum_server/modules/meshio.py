@@ -9,14 +9,20 @@ import numpy as np
 
 from arboretum_library.checks import check_input_file
 from arboretum_library.errors import InputError
+from arboretum_library.export.obj import obj_up_axis
 from arboretum_library.geometry import yup_to_zup
+
+OBJ_HEADER = "# arboretum OBJ (Z up, metres)"
+"""First line of the OBJ files ``save_obj`` writes; ``obj_up_axis`` reads the axis from it."""
 
 
 def load_mesh(path: str | Path, what: str = "module mesh") -> tuple[np.ndarray, np.ndarray]:
     """Vertices (V, 3) float64 Z up and faces (F, 3) int32 of the mesh in ``path`` (.obj, .glb, .gltf);
     errors name it as ``what`` (e.g. ``--crown``).
 
-    OBJ is taken as Z up (as we write it); glTF is Y up and converted. Coincident vertices are merged.
+    glTF is Y up and converted. OBJ is Y up and converted too (as ``export.obj.write_obj``, Blender and
+    Maya write it) unless its header says Z up (``arboretum_library.export.obj.obj_up_axis``), as
+    ``save_obj``'s module files do. Coincident vertices are merged.
     """
     import trimesh
 
@@ -35,16 +41,17 @@ def load_mesh(path: str | Path, what: str = "module mesh") -> tuple[np.ndarray, 
     faces = np.asarray(mesh.faces, dtype=np.int32)
     if len(faces) == 0:
         raise InputError(f"{what} {path}: has no triangles")
-    if suffix != ".obj":
+    if suffix != ".obj" or obj_up_axis(path) == "y":
         vertices = yup_to_zup(vertices)
     return vertices, faces
 
 
 def save_obj(path: str | Path, vertices: np.ndarray, faces: np.ndarray, comment: str = "") -> None:
-    """Write a triangle mesh (V, 3) / (F, 3) as OBJ (Z up, metres) via a temporary file."""
+    """Write a triangle mesh (V, 3) / (F, 3) as OBJ (Z up, metres, said on its first line so
+    ``load_mesh`` reads it back unchanged) via a temporary file."""
     path = Path(path)
     tmp = path.with_suffix(path.suffix + ".tmp")
-    lines = [f"# {line}" for line in comment.splitlines()]
+    lines = [OBJ_HEADER] + [f"# {line}" for line in comment.splitlines()]
     lines += [f"v {x:.5f} {y:.5f} {z:.5f}" for x, y, z in np.asarray(vertices, dtype=np.float64)]
     lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in np.asarray(faces, dtype=np.int64)]
     tmp.write_text("\n".join(lines) + "\n")
