@@ -30,12 +30,12 @@ def _parts(rng):
 def test_obj_mtl_round_trip(tmp_path, rng):
     parts, mats = _parts(rng)
     files = write_obj(tmp_path / "t.obj", parts, mats)
-    assert sorted(f.name for f in files) == ["bark.png", "leaf.png", "t.mtl", "t.obj"]
+    assert sorted(f.name for f in files) == ["t.mtl", "t.obj", "t_bark.png", "t_leaf.png"]
     text = (tmp_path / "t.obj").read_text().splitlines()
     assert sum(line.startswith("v ") for line in text) == 12
     assert sum(line.startswith("f ") for line in text) == 14
     mtl = (tmp_path / "t.mtl").read_text()
-    assert "map_Kd bark.png" in mtl and "map_d leaf.png" in mtl
+    assert "map_Kd t_bark.png" in mtl and "map_d t_leaf.png" in mtl
     v = np.array([line.split()[1:] for line in text if line.startswith("v ")], float)
     assert v[:8, 1].max() == pytest.approx(3.0, abs=1e-5)  # Y up: world z (0..3) became y
     m = trimesh.load(tmp_path / "t.obj", force="mesh", process=False)

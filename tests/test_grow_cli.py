@@ -46,7 +46,7 @@ def test_grow_glb_with_json_and_skeleton(tmp_path, hbl_file, capsys):
 
 def test_grow_obj_ply_and_skeleton_ply(tmp_path, hbl_file):
     assert main(["grow", str(hbl_file), "--out", str(tmp_path / "t.obj"), "--lod", "1"]) == 0
-    assert (tmp_path / "t.mtl").exists() and (tmp_path / "leaf.png").stat().st_size > 1000
+    assert (tmp_path / "t.mtl").exists() and (tmp_path / "t_leaf.png").stat().st_size > 1000
     assert main(["grow", str(hbl_file), "--out", str(tmp_path / "t.ply"),
                  "--skeleton", str(tmp_path / "s.ply")]) == 0
     ply = PlyData.read(str(tmp_path / "s.ply"))
