@@ -41,6 +41,7 @@ def no_work(monkeypatch):
     monkeypatch.setattr(modules_cli, "_grown", fail)
     monkeypatch.setattr(modules_cli, "_converted", fail)
     monkeypatch.setattr(render_cli, "load_scene", fail)
+    monkeypatch.setattr(render_cli, "read_input", fail)
 
 
 def _error(argv, capsys) -> str:

@@ -6,6 +6,11 @@ an HBL or Example record (.npz written by ``arboretum_library.codec.save_record`
 (.ply with faces, .obj), or a binary glTF (.glb: grown trees, instanced module trees; read by
 ``arboretum_library.export.gltf_read``; drawn with its textures, alpha modes and double-sidedness
 unless ``--no-textures``). Several inputs are drawn together. Rendering is headless (EGL).
+
+An .obj is read as Y up (as ``arboretum grow``, Blender and Maya write it) unless its header says Z up
+(``arboretum_library.export.obj.obj_up_axis``). Inputs far from the world origin (georeferenced scans
+in UTM coordinates) are drawn relative to the centre of all inputs, taken in float64 before the GPU's
+float32 (``scene_build.far_origin``).
 """
 
 from __future__ import annotations
@@ -51,7 +56,7 @@ def parse_size(text: str) -> tuple[int, int]:
 
 def run(args: argparse.Namespace) -> int:
     from .headless import OffscreenRenderer, save_png
-    from .scene_build import HBLStyle, combine
+    from .scene_build import HBLStyle, combine, far_origin
 
     size = parse_size(args.size)
     for path in args.inputs:
@@ -60,7 +65,9 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     style = HBLStyle(show_points=args.points, grid=False)
     textures = not getattr(args, "no_textures", False)
-    scene = combine(*(load_scene(Path(p), style, textures) for p in args.inputs), grid=not args.no_grid)
+    loaded = [read_input(Path(p), style, textures) for p in args.inputs]
+    origin = far_origin(np.concatenate([corners for corners, _ in loaded]))
+    scene = combine(*(build(origin) for _, build in loaded), grid=not args.no_grid)
     with OffscreenRenderer(size) as r:
         image = r.render(scene, view=args.view)
         stats = r.renderer.stats
@@ -75,27 +82,53 @@ def run(args: argparse.Namespace) -> int:
 
 def load_scene(path: Path, style, textures: bool = True):
     """A Scene for one input file, chosen by its extension (and content for .ply); a GLB's meshes are
-    textured unless ``textures`` is False."""
-    from .scene_build import glb_scene, hbl_scene, mesh_scene, points_scene
+    textured unless ``textures`` is False. Far from the world origin, it is centred (``far_origin``)."""
+    from .scene_build import far_origin
+
+    corners, build = read_input(path, style, textures)
+    return build(far_origin(corners))
+
+
+def read_input(path: Path, style, textures: bool = True):
+    """(corners, build) for one input file: its (2, 3) float64 world bounding box, and a function taking
+    an origin (3,) to the input's Scene relative to it (see ``load_scene``)."""
+    from .scene_build import glb_scene, hbl_points, hbl_scene, mesh_scene, points_scene
 
     check_input_file(str(path), "INPUT")
     ext = path.suffix.lower()
     if ext == ".glb":
         from arboretum_library.export.gltf_read import read_glb
 
-        return glb_scene(read_glb(path), grid=False, textures=textures, source=str(path))
+        meshes = read_glb(path)
+        return _glb_corners(meshes), lambda o: glb_scene(meshes, False, textures, str(path), origin=o)
     if ext == ".gltf":
         raise InputError(f"{path}: only binary glTF (.glb) is read; save it as .glb")
     if ext == ".npz":
-        return hbl_scene(load_hbl(path), style)
-    if ext == ".obj":
-        return mesh_scene(*read_obj(path), grid=False)
-    if ext == ".ply":
-        verts, faces = read_ply(path)
+        hbl = load_hbl(path)
+        return _corners(hbl_points(hbl)), lambda o: hbl_scene(hbl, style, origin=o)
+    if ext in (".obj", ".ply"):
+        verts, faces = read_obj(path) if ext == ".obj" else read_ply(path)
         if len(faces):
-            return mesh_scene(verts, faces, grid=False)
+            return _corners(verts), lambda o: mesh_scene(verts, faces, grid=False, origin=o)
     points, colors = read_point_cloud(path)
-    return points_scene(points, colors, grid=False)
+    return _corners(points), lambda o: points_scene(points, colors, grid=False, origin=o)
+
+
+def _corners(points: np.ndarray) -> np.ndarray:
+    """(2, 3) float64 bounding-box corners of ``points`` (N, 3); (0, 3) when there are none."""
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    return np.stack([p.min(axis=0), p.max(axis=0)]) if len(p) else p
+
+
+def _glb_corners(meshes) -> np.ndarray:
+    """(2, 3) world bounding-box corners of GLB meshes: each mesh's box corners under each placement."""
+    boxes = []
+    for g in (g for g in meshes if len(g.positions)):
+        lo, hi = g.positions.min(axis=0), g.positions.max(axis=0)
+        box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        boxes.append(np.einsum("kij,nj->kni", g.instances[:, :3, :3], box).reshape(-1, 3)
+                     + np.repeat(g.instances[:, :3, 3], 8, axis=0))
+    return _corners(np.concatenate(boxes)) if boxes else np.zeros((0, 3))
 
 
 def load_hbl(path: Path):
@@ -141,7 +174,11 @@ def read_ply(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def read_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (V, 3) and triangles (F, 3) of a Wavefront .obj (v and f lines only)."""
+    """Vertices (V, 3) float64 Z up and triangles (F, 3) of a Wavefront .obj (v and f lines only); Y up
+    unless its header says Z up (``obj_up_axis``)."""
+    from arboretum_library.export.obj import obj_up_axis
+    from arboretum_library.geometry import yup_to_zup
+
     verts, polys = [], []
     for line in path.read_text(errors="replace").splitlines():
         parts = line.split()
@@ -153,7 +190,8 @@ def read_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
         raise InputError(f"{path}: an OBJ needs 'v' and 'f' lines, found {len(verts)} and {len(polys)}")
     nv = len(verts)
     polys = [np.where(p < 0, nv + p, p - 1) for p in polys]  # 1-based, negatives count from the end
-    return np.asarray(verts, np.float64), _triangulate(polys, nv, path)
+    verts = np.asarray(verts, np.float64)
+    return (yup_to_zup(verts) if obj_up_axis(path) == "y" else verts), _triangulate(polys, nv, path)
 
 
 def _triangulate(polys: list[np.ndarray], n_verts: int, path: Path) -> np.ndarray:

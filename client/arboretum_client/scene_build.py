@@ -3,6 +3,10 @@
 Colours follow the VRTree paper's figures: main branches red, secondary branches black; each lobe is a
 translucent hull in its own colour from ``LOBE_PALETTE`` (cycled); source points by label (wood brown,
 leaf green). Pick ids are assigned in order and named in ``Scene.names`` ('branch:3', 'lobe:0', ...).
+
+Scene records hold float32 (the GPU's dtype), which resolves only 0.25-0.5 m at UTM coordinates
+(4e6 m). Every builder takes an ``origin`` (3,) float64 that is subtracted in float64 before the cast;
+``far_origin`` picks one for data far from the world origin, so georeferenced scans draw intact.
 """
 
 from __future__ import annotations
@@ -35,6 +39,20 @@ WOOD_COLOR = (0.45, 0.30, 0.16)
 LEAF_COLOR = (0.25, 0.62, 0.20)
 POINT_COLOR = (0.20, 0.30, 0.45)
 
+FAR = 128.0
+"""``far_origin`` moves the scene when its centre lies farther than this (m, in any coordinate) from the
+world origin (float32 resolves 8 µm at 128 m)."""
+
+
+def far_origin(points: np.ndarray) -> np.ndarray:
+    """(3,) float64: the centre of the bounding box of ``points`` (N, 3) rounded to whole metres when it is
+    farther than ``FAR`` from the world origin, else zeros (near data are drawn where they are)."""
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    if not len(p):
+        return np.zeros(3)
+    centre = (p.min(axis=0) + p.max(axis=0)) / 2
+    return np.round(centre) + 0.0 if np.abs(centre).max() > FAR else np.zeros(3)
+
 
 @dataclass(frozen=True)
 class HBLStyle:
@@ -52,50 +70,60 @@ class HBLStyle:
     """Draw a ground grid under the structure."""
 
 
-def _diagonal(hbl: HBL) -> float:
+def hbl_points(hbl: HBL | Example) -> np.ndarray:
+    """(N, 3) float64: every point an HBL (or an Example's structure) draws (branches, hulls, points, root)."""
+    hbl = hbl.structure if isinstance(hbl, Example) else hbl
     pts = [b.points for b in hbl.branches] + [lb.hull_vertices for lb in hbl.lobes] + [hbl.points]
-    allp = np.concatenate([np.asarray(p).reshape(-1, 3) for p in pts] + [hbl.root[None]])
+    return np.concatenate([np.asarray(p, np.float64).reshape(-1, 3) for p in pts] + [hbl.root[None]])
+
+
+def _diagonal(hbl: HBL) -> float:
+    allp = hbl_points(hbl)
     return float(np.linalg.norm(allp.max(axis=0) - allp.min(axis=0)))
 
 
-def hbl_items(hbl: HBL | Example, style: HBLStyle = HBLStyle(), first_id: int = 1):
-    """Items and id names for an HBL (or an Example's structure): branch tubes, lobe hulls, points."""
+def hbl_items(hbl: HBL | Example, style: HBLStyle = HBLStyle(), first_id: int = 1,
+              origin: np.ndarray | None = None):
+    """Items and id names for an HBL (or an Example's structure): branch tubes, lobe hulls, points;
+    positions relative to ``origin`` (3,) when given."""
     hbl = hbl.structure if isinstance(hbl, Example) else hbl
     min_r = style.min_radius_fraction * max(_diagonal(hbl), 1e-6)
     items, names, pid = [], {}, first_id
     for i, b in enumerate(hbl.branches):
-        items.append(Polyline(points=_f32(b.points), radii=_f32(np.maximum(b.radii, min_r)),
+        items.append(Polyline(points=_local(b.points, origin), radii=_f32(np.maximum(b.radii, min_r)),
                               color=_f32(BRANCH_COLORS[b.level]), pick_id=pid))
         names[pid], pid = f"branch:{i}", pid + 1
     for j, lobe in enumerate(hbl.lobes):
         color = _f32((*LOBE_PALETTE[j % len(LOBE_PALETTE)], style.lobe_alpha))
-        items.append(Mesh(vertices=_f32(lobe.hull_vertices), faces=lobe.hull_faces, color=color, pick_id=pid))
+        items.append(Mesh(vertices=_local(lobe.hull_vertices, origin), faces=lobe.hull_faces, color=color, pick_id=pid))
         names[pid], pid = f"lobe:{j}", pid + 1
     if style.show_points and len(hbl.points):
         colors = _f32(np.where((hbl.labels == LEAF)[:, None], LEAF_COLOR, WOOD_COLOR))
-        items.append(PointSet(points=_f32(hbl.points), colors=colors, size_px=style.point_px, pick_id=pid))
+        items.append(PointSet(points=_local(hbl.points, origin), colors=colors, size_px=style.point_px, pick_id=pid))
         names[pid] = "points"
     return items, names
 
 
-def hbl_scene(hbl: HBL | Example, style: HBLStyle = HBLStyle()) -> Scene:
-    """A Scene of one HBL structure (with a ground grid when ``style.grid``)."""
-    items, names = hbl_items(hbl, style)
+def hbl_scene(hbl: HBL | Example, style: HBLStyle = HBLStyle(), origin: np.ndarray | None = None) -> Scene:
+    """A Scene of one HBL structure (with a ground grid when ``style.grid``), relative to ``origin``."""
+    items, names = hbl_items(hbl, style, origin=origin)
     return _with_grid(Scene(items=tuple(items), names=names), style.grid)
 
 
 def points_scene(points: np.ndarray, colors: np.ndarray | None = None, size_px: float = 2.0,
-                 grid: bool = True) -> Scene:
-    """A Scene of a point cloud (N, 3); ``colors`` (N, 3) in 0..1, or one colour for all."""
-    pts = _f32(points).reshape(-1, 3)
+                 grid: bool = True, origin: np.ndarray | None = None) -> Scene:
+    """A Scene of a point cloud (N, 3) relative to ``origin`` (3,); ``colors`` (N, 3) in 0..1, or one
+    colour for all."""
+    pts = _local(np.asarray(points).reshape(-1, 3), origin)
     cols = _f32(np.broadcast_to(POINT_COLOR, pts.shape) if colors is None else colors)
     item = PointSet(points=pts, colors=cols, size_px=size_px, pick_id=1)
     return _with_grid(Scene(items=(item,), names={1: "points"}), grid)
 
 
-def mesh_scene(vertices: np.ndarray, faces: np.ndarray, color=(0.62, 0.55, 0.45, 1.0), grid: bool = True) -> Scene:
-    """A Scene of one triangle mesh: vertices (V, 3), faces (F, 3)."""
-    item = Mesh(vertices=_f32(vertices), faces=np.asarray(faces, np.int32), color=_f32(color), pick_id=1)
+def mesh_scene(vertices: np.ndarray, faces: np.ndarray, color=(0.62, 0.55, 0.45, 1.0), grid: bool = True,
+               origin: np.ndarray | None = None) -> Scene:
+    """A Scene of one triangle mesh: vertices (V, 3) relative to ``origin`` (3,), faces (F, 3)."""
+    item = Mesh(vertices=_local(vertices, origin), faces=np.asarray(faces, np.int32), color=_f32(color), pick_id=1)
     return _with_grid(Scene(items=(item,), names={1: "mesh"}), grid)
 
 
@@ -114,7 +142,8 @@ def texture_mean_color(image: bytes) -> np.ndarray:
     return (rgba[..., :3].reshape(-1, 3) * alpha).sum(axis=0) / max(float(alpha.sum()), 1e-9)
 
 
-def glb_items(meshes, first_id: int = 1, textures: bool = False, source: str = "GLB"):
+def glb_items(meshes, first_id: int = 1, textures: bool = False, source: str = "GLB",
+              origin: np.ndarray | None = None):
     """Items and id names for ``GltfMesh`` records (``arboretum_library.export.gltf_read``).
 
     Flat (``textures`` False): each is drawn in its material's colour (baseColorFactor times the
@@ -122,17 +151,20 @@ def glb_items(meshes, first_id: int = 1, textures: bool = False, source: str = "
     cut out below 0.5) and sidedness; identical embedded images are decoded once and shared, so the
     renderer uploads them once (``source`` names the file in errors). A mesh placed K > 1 times becomes
     one ``InstancedMesh`` (one draw call); placed once, or translucent (alphaMode BLEND), it is baked
-    into one world-frame ``Mesh``.
+    into one world-frame ``Mesh``. World positions are taken relative to ``origin`` (3,) when given.
     """
+    shift = np.eye(4)
+    if origin is not None:
+        shift[:3, 3] = -np.asarray(origin, np.float64)
     items, names, images = [], {}, {}
     for g in (g for g in meshes if len(g.faces)):
         pid = first_id + len(items)
         rgb = g.base_color[:3] * (texture_mean_color(g.texture) if g.texture is not None else 1.0)
         color = _f32((*np.clip(rgb, 0.0, 1.0), g.base_color[3] if g.alpha_mode == "BLEND" else 1.0))
         if len(g.instances) > 1 and color[3] >= 1.0:
-            item = InstancedMesh(Mesh(_f32(g.positions), g.faces, color, pid), _f32(g.instances))
+            item = InstancedMesh(Mesh(_f32(g.positions), g.faces, color, pid), _f32(shift @ g.instances))
         else:
-            verts = np.concatenate([g.positions @ T[:3, :3].T + T[:3, 3] for T in g.instances])
+            verts = np.concatenate([g.positions @ T[:3, :3].T + T[:3, 3] for T in shift @ g.instances])
             faces = (g.faces[None] + len(g.positions) * np.arange(len(g.instances))[:, None, None]).reshape(-1, 3)
             item = Mesh(_f32(verts), faces.astype(np.int32), color, pid)
         items.append(_textured(item, g, images, source) if textures else item)
@@ -140,10 +172,11 @@ def glb_items(meshes, first_id: int = 1, textures: bool = False, source: str = "
     return items, names
 
 
-def glb_scene(meshes, grid: bool = True, textures: bool = False, source: str = "GLB") -> Scene:
+def glb_scene(meshes, grid: bool = True, textures: bool = False, source: str = "GLB",
+              origin: np.ndarray | None = None) -> Scene:
     """A Scene of the meshes read from a GLB (``gltf_read.read_glb``), with a ground grid when ``grid``
-    (textured as ``glb_items``)."""
-    items, names = glb_items(meshes, textures=textures, source=source)
+    (textured as ``glb_items``, relative to ``origin``)."""
+    items, names = glb_items(meshes, textures=textures, source=source, origin=origin)
     return _with_grid(Scene(items=tuple(items), names=names), grid)
 
 
@@ -193,6 +226,12 @@ def decode_texture(data: bytes, source: str = "GLB") -> np.ndarray:
 def _f32(values) -> np.ndarray:
     """float32 array of ``values`` (the GPU-side dtype of scene records)."""
     return np.asarray(values, dtype=np.float32)
+
+
+def _local(values, origin: np.ndarray | None) -> np.ndarray:
+    """float32 of float64 ``values`` (..., 3) minus ``origin`` (3,) (subtracted before the cast)."""
+    values = np.asarray(values, np.float64)
+    return _f32(values if origin is None else values - np.asarray(origin, np.float64))
 
 
 def _with_grid(scene: Scene, grid: bool) -> Scene:
