@@ -2,7 +2,8 @@
 
 The frame loop ``submit``s a call (a name, a function of the port, a callback); the worker runs calls
 in order and posts ``Done`` (result or error) and ``Progress`` records to a queue that the frame loop
-``drain``s once per frame, running callbacks on the main thread. The port (and its sockets) is only
+``drain``s once per frame, running callbacks on the main thread. A ``USER_ERRORS`` failure raised by
+an ``on_done`` callback (e.g. writing the reply to an unwritable folder) goes to the job's ``on_error``. The port (and its sockets) is only
 ever touched by the worker thread.
 """
 
@@ -15,7 +16,13 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from arboretum_library.errors import ArboretumError
+
 from .session_port import SessionPort
+
+USER_ERRORS = (ArboretumError, OSError)
+"""Failures a user can cause (a bad file, an unwritable folder, a refused request): a status line,
+never an exception in the frame loop. Anything else is a bug and keeps its traceback."""
 
 
 @dataclass(frozen=True)
@@ -118,10 +125,14 @@ class Worker:
                 continue
             self.running.pop(item.job.id, None)
             finished.append(item)
-            if item.error is None and item.job.on_done is not None:
-                item.job.on_done(item.result)
-            elif item.error is not None and item.job.on_error is not None:
-                item.job.on_error(item.error)
+            error = item.error
+            if error is None and item.job.on_done is not None:
+                try:
+                    item.job.on_done(item.result)
+                except USER_ERRORS as exc:  # e.g. writing the reply to a file the user named
+                    error = exc
+            if error is not None and item.job.on_error is not None:
+                item.job.on_error(error)
         return finished
 
     def idle(self) -> bool:

@@ -1,8 +1,13 @@
-"""glfw callbacks -> the desktop input records the App handles (the only glfw input code)."""
+"""glfw callbacks -> the desktop input records the App handles (the only glfw input code).
+
+Cursor positions come in window units and are scaled to framebuffer pixels (HiDPI); a framebuffer size
+change (resize, maximise) resizes the renderer and the UI (``App.resize``)."""
 
 from __future__ import annotations
 
 from .input.desktop import Key, MouseButton, MouseMove, Scroll
+from .net import USER_ERRORS
+from .tools.actions import describe_error
 
 SPECIAL = {"TAB": "tab", "ENTER": "enter", "KP_ENTER": "enter", "ESCAPE": "escape", "BACKSPACE": "backspace",
            "DELETE": "delete", "SPACE": "space", "LEFT_CONTROL": "ctrl", "RIGHT_CONTROL": "ctrl",
@@ -18,8 +23,27 @@ def key_table() -> dict[int, str]:
     return {getattr(glfw, f"KEY_{name}"): value for name, value in SPECIAL.items() if hasattr(glfw, f"KEY_{name}")}
 
 
+def handle_safely(app, event) -> None:
+    """``app.handle(event)``, with a failure the user caused put in the status line: an exception
+    escaping a glfw callback would be re-raised by ``glfw.poll_events`` and end the client."""
+    try:
+        app.handle(event)
+    except USER_ERRORS as exc:
+        app.state.errors.append(describe_error(exc))
+        app.state.say(f"failed: {describe_error(exc)}")
+
+
+def cursor_scale(window) -> tuple[float, float]:
+    """Framebuffer pixels per window unit (x, y): 1 on most displays, 2 on a HiDPI/Retina one."""
+    import glfw
+
+    (ww, wh), (fw, fh) = glfw.get_window_size(window), glfw.get_framebuffer_size(window)
+    return (fw / ww if ww > 0 else 1.0), (fh / wh if wh > 0 else 1.0)
+
+
 def install_callbacks(window, app) -> None:
-    """Route glfw's mouse, scroll and key callbacks of ``window`` into ``app.handle``."""
+    """Route glfw's mouse, scroll and key callbacks of ``window`` into ``app.handle`` (cursor positions
+    mapped from window units to framebuffer pixels), and framebuffer size changes into ``app.resize``."""
     import glfw
 
     table = key_table()
@@ -29,10 +53,19 @@ def install_callbacks(window, app) -> None:
             return
         name = table.get(key) or (glfw.get_key_name(key, scancode) or "").lower()
         if name:
-            app.handle(Key(name, action == glfw.PRESS))
+            handle_safely(app, Key(name, action == glfw.PRESS))
 
-    glfw.set_cursor_pos_callback(window, lambda _w, x, y: app.handle(MouseMove(float(x), float(y))))
+    def on_cursor(w, x, y):
+        sx, sy = cursor_scale(w)
+        handle_safely(app, MouseMove(float(x) * sx, float(y) * sy))
+
+    def on_framebuffer(_w, width, height):
+        if width > 0 and height > 0:  # 0 x 0 while minimised: keep the last size
+            app.resize((int(width), int(height)))
+
+    glfw.set_cursor_pos_callback(window, on_cursor)
     glfw.set_mouse_button_callback(
-        window, lambda _w, b, action, _m: app.handle(MouseButton(BUTTONS.get(b, "other"), action == glfw.PRESS)))
-    glfw.set_scroll_callback(window, lambda _w, _dx, dy: app.handle(Scroll(float(dy))))
+        window, lambda _w, b, action, _m: handle_safely(app, MouseButton(BUTTONS.get(b, "other"), action == glfw.PRESS)))
+    glfw.set_scroll_callback(window, lambda _w, _dx, dy: handle_safely(app, Scroll(float(dy))))
     glfw.set_key_callback(window, on_key)
+    glfw.set_framebuffer_size_callback(window, on_framebuffer)

@@ -6,6 +6,7 @@ thread (``Worker.drain``); nothing here waits.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 from pathlib import Path
@@ -14,10 +15,18 @@ import numpy as np
 
 from arboretum_client.net import Worker
 from arboretum_library.codec import load_record, save_record
+from arboretum_library.errors import InputError
 from arboretum_library.model import Assembly
 from arboretum_library.protocol import Edit, RefineState, SessionAssembly
 
 from .state import REFINEMENT, ClientState
+
+
+def describe_error(exc: BaseException) -> str:
+    """One line for a failure the user can cause (a file error names the file)."""
+    if isinstance(exc, OSError) and exc.filename is not None:
+        return f"{exc.filename}: {exc.strerror or exc}"
+    return str(exc) or type(exc).__name__
 
 
 class Actions:
@@ -28,8 +37,9 @@ class Actions:
 
     def _fail(self, what: str):
         def on_error(exc: BaseException) -> None:
-            self.state.errors.append(f"{what}: {exc}")
-            self.state.say(f"{what} failed: {exc}")
+            text = describe_error(exc)
+            self.state.errors.append(f"{what}: {text}")
+            self.state.say(f"{what} failed: {text}")
         return on_error
 
     def _submit(self, name: str, call, on_done) -> int:
@@ -139,13 +149,27 @@ class Actions:
 
     def save(self, path: str | os.PathLike) -> None:
         def done(assembly: Assembly) -> None:
-            save_record(path, assembly)
+            try:
+                save_record(path, assembly)
+            except OSError as exc:  # raised from here, it becomes the status line (Worker.drain)
+                raise InputError(f"cannot write {path} ({exc.strerror or exc})") from None
             self.state.say(f"saved {Path(path).name}")
         self._submit("save", lambda p, _: p.save(), done)
 
     def load(self, path: str | os.PathLike) -> None:
-        assembly = load_record(path, Assembly)
-        self._submit("load", lambda p, _: p.load(assembly), lambda _r: self.sync())
+        """Read ``path`` on the worker thread (never in the frame loop); a missing or bad file is a
+        status line and leaves the session as it was."""
+        def call(port, _):
+            try:
+                assembly = load_record(path, Assembly)
+            except OSError as exc:
+                raise InputError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+            return port.load(assembly)
+
+        def done(_reply) -> None:
+            self.state.say(f"loaded {Path(path).name}")
+            self.sync()
+        self._submit("load", call, done)
 
     def grow(self, seed: int = 0) -> None:
         density = self.state.density
@@ -163,10 +187,15 @@ class Actions:
     def export(self, folder: str | os.PathLike, fmt: str = "glb") -> None:
         def done(reply) -> None:
             path = Path(folder) / reply.name
-            path.parent.mkdir(parents=True, exist_ok=True)
             tmp = path.with_name(f".{path.name}.tmp")
-            tmp.write_bytes(reply.data.tobytes())
-            os.replace(tmp, path)
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                tmp.write_bytes(reply.data.tobytes())
+                os.replace(tmp, path)
+            except OSError as exc:
+                with contextlib.suppress(OSError):
+                    tmp.unlink(missing_ok=True)
+                raise InputError(f"cannot write {path} ({exc.strerror or exc})") from None
             self.state.exported.append(str(path))
             self.state.say(f"exported {path.name} ({len(reply.data)} bytes)")
         self._submit("export", lambda p, progress: p.export_mesh(fmt, 0, {"density": self.state.density}, progress),
