@@ -33,11 +33,9 @@ from .tools.actions import Actions
 from .tools.interaction import Interaction
 from .tools.state import MODELING, REFINEMENT, ClientState
 from .tools.view import TouchIndex, build_scene
-from .ui.layout import draw_ui, ui_key
+from .ui.layout import PANEL_X, draw_ui, panel_width, ui_key
 from .ui.widgets import Canvas
 
-PANEL_PX = 260
-"""Width of the side panel in pixels."""
 TOUCH_RADIUS = 0.06
 """Metres: a VR touch ball this close to an item touches it."""
 REFERENCE_BEHIND = 0.6
@@ -52,11 +50,26 @@ def load_reference(path: str | Path) -> np.ndarray:
 
     try:
         with Image.open(path) as im:
-            return np.asarray(im.convert("RGBA"), np.uint8).copy()
+            return to_rgba8(im)
     except FileNotFoundError:
         raise InputError(f"reference image {path}: no such file") from None
     except (OSError, UnidentifiedImageError) as exc:
         raise InputError(f"reference image {path}: cannot read it as an image ({exc})") from None
+
+
+def to_rgba8(im) -> np.ndarray:
+    """A Pillow image as (H, W, 4) uint8 RGBA. 16-bit grayscale (modes I;16*, and I as Pillow opens
+    16-bit PNGs) is scaled 0..65535 -> 0..255 (Pillow's own convert clips it to white); float
+    grayscale (F) is taken as 0..1 when it lies there, else as 0..255."""
+    if im.mode.startswith("I;16") or im.mode in ("I", "F"):
+        a = np.asarray(im).astype(np.float64)
+        if im.mode == "F":
+            a = a * 255.0 if np.nanmax(a, initial=0.0) <= 1.0 else a
+        else:
+            a = a / 257.0
+        g = np.clip(np.nan_to_num(a), 0, 255).round().astype(np.uint8)
+        return np.dstack([g, g, g, np.full_like(g, 255)])
+    return np.asarray(im.convert("RGBA"), np.uint8).copy()
 
 
 def reference_billboard(image: np.ndarray, height: float = 1.0) -> Billboard:
@@ -248,8 +261,7 @@ class App:
         self._last_pixel = {LEFT: None, RIGHT: None}
         if not self._framed and has_items:  # framed on the tree (and the reference) once a tree comes
             self.desktop.camera = fit_camera(scene.bounds(), "iso", self.size[0] / self.size[1])
-            if self.ui_enabled:
-                self.desktop._pan(PANEL_PX / 2, 0.0)  # keep the tree clear of the side panel
+            self.clear_panel()
             self._framed = True
 
     def _sync_overlay(self, samples: list[HandSample]) -> None:
@@ -267,6 +279,23 @@ class App:
             self._ui = key
             self.canvas = draw_ui(self.size, self.state, self.worker.running)
             self.renderer.set_ui_image(self.canvas.rgba())
+
+    def clear_panel(self) -> None:
+        """Pan the camera by half the side panel's width (and margin) so the tree is clear of it."""
+        width = panel_width(self.size) if self.ui_enabled else 0
+        if width:
+            self.desktop._pan((width + PANEL_X) / 2, 0.0)
+
+    def resize(self, size: tuple[int, int]) -> None:
+        """The output (window framebuffer) is now ``size`` pixels: new render targets, the camera's
+        aspect follows (it is taken from the size each frame), the desktop cursor ray and the panels
+        are laid out again."""
+        size = (int(size[0]), int(size[1]))
+        if size == self.size:
+            return
+        self.renderer.resize(size)
+        self.size = self.desktop.size = size
+        self._ui, self._last_pixel = None, {LEFT: None, RIGHT: None}
 
     def move_mouse(self, x: float, y: float) -> None:
         self.handle(MouseMove(x, y))

@@ -95,6 +95,27 @@ class Renderer:
         self._id_fbo = ctx.framebuffer(color_attachments=[ctx.renderbuffer((w, h), 1, dtype="i4")],
                                        depth_attachment=ctx.depth_renderbuffer((w, h)))
 
+    def _release_framebuffers(self) -> None:
+        for fbo in {self._fbo, self._id_fbo, self.framebuffer}:
+            for att in [*fbo.color_attachments, fbo.depth_attachment]:
+                if att is not None:
+                    att.release()
+            fbo.release()
+
+    def resize(self, size: tuple[int, int]) -> None:
+        """Draw at a new output size from now on (a resized window): the render targets are made
+        again; the uploaded scene, textures and UI layer are kept (the next UI image sets its size)."""
+        size = (int(size[0]), int(size[1]))
+        if size == self.size:
+            return
+        if min(size) < 1:
+            raise ValueError(f"renderer size must be positive, got {size}")
+        (self.ctx.screen or self.ctx.detect_framebuffer(0)).use()
+        self._release_framebuffers()
+        self.size = size
+        self._make_framebuffers()
+        self._camera, self._pick_valid = None, False
+
     # -- scene ---------------------------------------------------------------------------------
     def upload(self, scene: Scene) -> None:
         """Replace the GPU copy of the scene (buffers are built here, not per frame)."""
@@ -304,11 +325,6 @@ class Renderer:
         self.overlay = []
         self.ui.release()
         (self.ctx.screen or self.ctx.detect_framebuffer(0)).use()
-        fbos = {self._fbo, self._id_fbo, self.framebuffer}
-        for fbo in fbos:
-            for att in [*fbo.color_attachments, fbo.depth_attachment]:
-                if att is not None:
-                    att.release()
-            fbo.release()
+        self._release_framebuffers()
         self._background.release()
         self.programs.release()
