@@ -9,16 +9,28 @@ from .widgets import DIM, LINE_H, TEXT, Canvas
 TAGS = ("straight", "curved", "dense", "sparse")
 WIDTH = 250
 MAX_ROWS = 12
+FIXED_H = 36 + 2 * LINE_H + 14 + 8 + LINE_H + 2 + 6 * (LINE_H + 4) + 6
+"""Height of everything but the example rows (title, search, tags, tool buttons)."""
 
 
-def draw(c: Canvas, s: ClientState) -> None:
+def fitting_rows(n: int, space: int) -> tuple[int, bool]:
+    """(rows shown, whether a '... more' line is needed) for ``n`` examples in ``space`` pixels of panel."""
+    rows = min(n, MAX_ROWS, max((space - FIXED_H) // (LINE_H + 2), 0))
+    if rows < n:  # the '... more' line takes a row's place when space is short
+        rows = min(rows, max((space - FIXED_H - LINE_H) // (LINE_H + 2), 0))
+    return rows, rows < n
+
+
+def draw(c: Canvas, s: ClientState, width: int = WIDTH, bottom: int | None = None) -> None:
+    """The panel ``width`` pixels wide from (10, 10), its example list cut to end above ``bottom``."""
     x0, y0 = 10, 10
-    rows = min(len(s.library), MAX_ROWS)
-    height = 36 + 2 * LINE_H + 14 + rows * (LINE_H + 2) + (LINE_H if len(s.library) > MAX_ROWS else 0) \
-        + 8 + LINE_H + 2 + 6 * (LINE_H + 4) + 6
-    y = c.panel((x0, y0, x0 + WIDTH, y0 + height), "Library")
+    rows, more = fitting_rows(len(s.library), (c.size[1] if bottom is None else bottom) - y0)
+    height = FIXED_H + rows * (LINE_H + 2) + (LINE_H if more else 0)
+    chars = max((width - 28) // 7, 4)
+    y = c.panel((x0, y0, x0 + width, y0 + height), "Library")
     query = s.query + ("|" if s.search_focus else "")
-    c.button((x0 + 8, y, x0 + WIDTH - 8, y + LINE_H), f"search: {query or '(press /)'}", "search:focus", s.search_focus)
+    c.button((x0 + 8, y, x0 + width - 8, y + LINE_H), f"search: {query or '(press /)'}"[:chars], "search:focus",
+             s.search_focus)
     y += LINE_H + 6
     x = x0 + 8
     for tag in TAGS:
@@ -26,12 +38,13 @@ def draw(c: Canvas, s: ClientState) -> None:
         c.button((x, y, x + w, y + LINE_H), tag, f"tag:{tag}", s.tag_filter == tag)
         x += w + 4
     y += LINE_H + 8
-    for row in s.library[:MAX_ROWS]:
+    for row in s.library[:rows]:
         label = f"{row['id']}  {row.get('lobe_count', '?')} lobes  {' '.join(row.get('tags', ()))}"
-        c.button((x0 + 8, y, x0 + WIDTH - 8, y + LINE_H), label[:38], f"choose:{row['id']}", s.chosen == row["id"])
+        c.button((x0 + 8, y, x0 + width - 8, y + LINE_H), label[:min(38, chars)], f"choose:{row['id']}",
+                 s.chosen == row["id"])
         y += LINE_H + 2
-    if len(s.library) > MAX_ROWS:
-        c.text((x0 + 8, y), f"... {len(s.library) - MAX_ROWS} more", DIM)
+    if more:
+        c.text((x0 + 8, y), f"... {len(s.library) - rows} more", DIM)
         y += LINE_H
     y += 8
     c.text((x0 + 8, y), "Modeling", TEXT, size=14)

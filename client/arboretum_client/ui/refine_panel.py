@@ -9,9 +9,10 @@ from .widgets import DIM, LINE_H, TEXT, Canvas
 WIDTH = 250
 
 
-def draw(c: Canvas, s: ClientState) -> None:
+def draw(c: Canvas, s: ClientState, width: int = WIDTH, bottom: int | None = None) -> None:
+    """The panel ``width`` pixels wide from (10, 10) (``bottom`` is unused: its content is fixed)."""
     x0, y0 = 10, 10
-    y = c.panel((x0, y0, x0 + WIDTH, y0 + 330), "Refinement")
+    y = c.panel((x0, y0, x0 + width, y0 + 330), "Refinement")
     hbl = s.draft
     if hbl is None:
         c.text((x0 + 8, y), "no draft: open a scan", DIM)
@@ -19,7 +20,7 @@ def draw(c: Canvas, s: ClientState) -> None:
     else:
         c.text((x0 + 8, y), f"{len(hbl.branches)} branches, {len(hbl.lobes)} lobes", TEXT)
         y += LINE_H
-        c.text((x0 + 8, y), f"selected: {', '.join(s.selection) or '-'}"[:40], DIM)
+        c.text((x0 + 8, y), f"selected: {', '.join(s.selection) or '-'}"[:max((width - 10) // 6, 4)], DIM)
         y += LINE_H
         c.text((x0 + 8, y), f"points selected: {len(s.point_selection)}", DIM)
         y += LINE_H

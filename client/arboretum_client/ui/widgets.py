@@ -72,9 +72,11 @@ class Canvas:
         return y
 
     def bar(self, box: tuple[int, int, int, int], fraction: float | None) -> None:
-        """A progress bar; ``None`` draws an indeterminate (striped) bar."""
-        self.draw.rectangle(box, fill=BUTTON)
+        """A progress bar; ``None`` draws an indeterminate (striped) bar. An empty box draws nothing."""
         x0, y0, x1, y1 = box
+        if x1 <= x0 or y1 <= y0:
+            return
+        self.draw.rectangle(box, fill=BUTTON)
         if fraction is None:
             for x in range(x0, x1, 12):
                 self.draw.rectangle((x, y0, min(x + 5, x1), y1), fill=ACCENT)
