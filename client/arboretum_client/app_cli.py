@@ -11,11 +11,15 @@ embedded ``arboretum serve`` starts as a child process on a free loopback port a
 OpenXR runtime when one is present and otherwise says why and opens the desktop window.
 ``--reference`` shows a PNG/JPEG as a billboard standing behind the origin (key B hides/shows it); a
 script may name one too (top-level key ``reference``, relative to the script's folder).
+
+Arguments and the script's steps are checked before a window opens or a server starts (``check_args``,
+``script_check.check_steps``): a bad one is one error line and exit code 2.
 """
 
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import time
 from pathlib import Path
@@ -28,7 +32,7 @@ def register(subparsers) -> None:
     where = p.add_mutually_exclusive_group()
     where.add_argument("--connect", metavar="ADDRESS", help="server endpoint, e.g. tcp://127.0.0.1:5555")
     where.add_argument("--offline", action="store_true", help="no server: built-in demo examples in memory")
-    p.add_argument("--library", metavar="LIB", help="example library for the embedded server")
+    p.add_argument("--library", metavar="LIB", help="an existing example library for the embedded server")
     p.add_argument("--scan", metavar="FILE", help="point cloud to refine (refinement mode, Tab)")
     p.add_argument("--size", default="1280x720", help="window or image size WIDTHxHEIGHT (default 1280x720)")
     p.add_argument("--headless", action="store_true", help="render without a display (EGL); needs --script")
@@ -86,19 +90,47 @@ def _reference(args):
     return reference_billboard(load_reference(path), 1.0 if height is None else height)
 
 
-def run(args: argparse.Namespace) -> int:
+ENDPOINT = re.compile(r"tcp://(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+):(\d{1,5})|ipc://\S+")
+"""What ``--connect`` accepts: tcp://HOST:PORT (a name, an IPv4 address or a bracketed IPv6 one) or ipc://PATH."""
+
+
+def check_args(args: argparse.Namespace) -> tuple[int, int]:
+    """Refuse bad startup arguments before a window opens or a server starts; returns the size."""
     from arboretum_library.errors import InputError
+    from arboretum_library.folders import check_marker
 
     from .render_cli import parse_size
 
     size = parse_size(args.size)
     if args.headless and not args.script:
         raise InputError("--headless needs --script S (there is no one to click)")
+    if args.connect is not None:
+        m = ENDPOINT.fullmatch(args.connect.strip())
+        if m is None or (m.group(2) is not None and not 0 < int(m.group(2)) < 65536):
+            raise InputError(f"--connect: {args.connect!r} is not a server address (tcp://HOST:PORT, e.g. "
+                             "tcp://127.0.0.1:5555, or ipc://PATH)")
+    if args.library is not None:
+        if args.offline or args.connect is not None:
+            raise InputError("--library is the embedded server's library: with --offline or --connect it would "
+                             "be ignored (a running server has its own --library)")
+        try:
+            check_marker(Path(args.library), create=False)
+        except InputError as exc:
+            raise InputError(f"--library: {exc} (the client opens an existing library; make one with "
+                             "'arboretum serve --library DIR' or 'arboretum decompose ... --library DIR')") from None
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        raise InputError(f"--out {args.out}: is a file, not a folder")
+    return size
+
+
+def run(args: argparse.Namespace) -> int:
+    size = check_args(args)
+    args.steps = _script_steps(args)  # checked here: a bad step is one error line before any window
     args.reference_item = _reference(args)  # before the server starts: a bad image is a quick error
+    scan = _scan(args.scan)
     cleanup: list = []
     try:
         factory = _port_factory(args, cleanup)
-        scan = _scan(args.scan)
         if args.headless:
             data = _run_headless(args, size, factory, scan)
         else:
@@ -118,11 +150,14 @@ def _summary(app, runner_frames: int, shots) -> dict:
 
 
 def _script_steps(args) -> list:
+    """The script's steps (plus the ``--screenshot``), checked (``script_check.check_steps``)."""
+    from .script_check import check_steps
     from .scripts import load_script
 
     steps = list(load_script(args.script)["steps"]) if args.script else []
     if args.screenshot:
         steps.append({"screenshot": str(Path(args.screenshot).resolve())})
+    check_steps(steps)
     return steps
 
 
@@ -139,7 +174,7 @@ def _run_headless(args, size, factory, scan) -> dict:
         holder.append(runner)
         try:
             app.start()
-            shots = runner.run(_script_steps(args))
+            shots = runner.run(args.steps)
             return _summary(app, int(round(runner.now / runner.dt)), shots)
         finally:
             app.close()
@@ -170,7 +205,7 @@ def _window_loop(args, win, size, factory, scan) -> dict:
     from .scripts import ScriptRunner
     from .window_input import install_callbacks
 
-    renderer = Renderer(win.ctx, size)
+    renderer = Renderer(win.ctx, glfw.get_framebuffer_size(win.handle))  # pixels: 2x the window on HiDPI
     app = App(renderer, factory, args.out, scan=scan, reference=args.reference_item)
     install_callbacks(win.handle, app)
     app.start()
@@ -180,7 +215,7 @@ def _window_loop(args, win, size, factory, scan) -> dict:
             runner = ScriptRunner(app, base=Path("."))
             app.clock = runner.clock
             app.actions.clock = runner.clock
-            shots = runner.run(_script_steps(args))
+            shots = runner.run(args.steps)
             frames = int(round(runner.now / runner.dt))
         last = time.monotonic()
         while not glfw.window_should_close(win.handle) and not (args.script and frames) and \

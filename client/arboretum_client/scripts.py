@@ -19,7 +19,8 @@ Steps (one key each):
 - ``{"reference": "photo.png"}`` (or ``{"image": ..., "height": metres}``, or null to remove it): show a
   reference image behind the tree (``App.set_reference``; the action ``reference`` hides/shows it).
 
-Top-level keys besides ``steps``: ``reference`` (an image path, relative to the script's folder) and
+Every step is checked before the first runs (``script_check``); a bad one is an ``InputError`` naming
+the step number and key. Top-level keys besides ``steps``: ``reference`` (an image path, relative to the script's folder) and
 ``reference_height`` (metres), read by ``arboretum client`` like ``--reference`` / ``--reference-height``.
 """
 
@@ -35,6 +36,7 @@ from arboretum_library.errors import InputError
 from .camera import fit_camera
 from .input.desktop import Key, MouseButton, MouseMove
 from .input.hands import LONG_PRESS, HandSample
+from .script_check import check_steps
 
 
 def load_script(path: str | Path) -> dict:
@@ -104,16 +106,31 @@ class ScriptRunner:
         return float(px[0]), float(px[1])
 
     def run(self, steps: list[dict]) -> list[Path]:
+        """Check every step (``script_check.check_steps``), then run them; ``InputError`` naming the
+        step for a malformed one, a ``choose:`` of an example the library does not have, or a
+        ``select`` of a name that is not in the scene."""
+        check_steps(steps)
         for i, step in enumerate(steps):
-            if not isinstance(step, dict) or len(step) != 1:
-                raise InputError(f"script step {i + 1}: expected one key, got {step!r}")
             (name, arg), = step.items()
-            handler = getattr(self, f"_step_{name}", None)
-            if handler is None:
-                raise InputError(f"script step {i + 1}: unknown step {name!r}")
-            handler(arg)
+            getattr(self, f"_step_{name}")(arg)
             self.settle()
+            problem = self._after(name, arg)
+            if problem:
+                raise InputError(f"script step {i + 1} ({name}): {problem}")
         return self.shots
+
+    def _after(self, name: str, arg) -> str | None:
+        """What went wrong with a step that only running it shows, or None."""
+        s = self.app.state
+        if name == "action" and arg.startswith("choose:") and arg[7:] not in s.examples:
+            return f"{arg}: no such example ({s.status})"
+        if name == "select":
+            scene = set(self.app.names.values())
+            for n in [arg] if isinstance(arg, str) else arg:
+                if n not in scene and not any(m.startswith(n + "/") for m in scene):
+                    shown = f"e.g. {', '.join(sorted(scene)[:8])}" if scene else "nothing is pickable now"
+                    return f"nothing named {n!r} in the scene ({shown})"
+        return None
 
     # -- steps -------------------------------------------------------------------------------------
     def _step_mouse(self, xy) -> None:
@@ -157,8 +174,7 @@ class ScriptRunner:
 
     def _step_view(self, view: str) -> None:
         self.app.desktop.camera = fit_camera(self.app.bounds, view, self.app.size[0] / self.app.size[1])
-        if self.app.ui_enabled:
-            self.app.desktop._pan(130.0, 0.0)  # keep the tree clear of the side panel
+        self.app.clear_panel()  # keep the tree clear of the side panel
 
     def _step_stroke(self, points) -> None:
         pts = np.asarray(points, float).reshape(-1, 3)
