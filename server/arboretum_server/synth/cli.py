@@ -33,8 +33,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--model", choices=MODELS, default="guiding", help="tree model (default: guiding)"
     )
-    p.add_argument(
-        "--species", default="default", help="species or preset name (see docs/synthetic.md)"
+    p.add_argument(  # None: 'default' for the guiding model; the harmonic model needs a name
+        "--species", default=None, help="species or preset name (see docs/synthetic.md)"
     )
     p.add_argument(
         "--seed", type=int, default=0, help="random seed, >= 0: the same seed gives the same tree"
@@ -45,7 +45,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, required=True, help="scan to write (.ply, .xyz or .npy)")
     p.add_argument("--truth", type=Path, help="ground truth to write (.npz)")
     p.add_argument("--mesh", type=Path, help="the true tree as a mesh: .glb (textured), .obj or .ply")
-    p.add_argument("--lod", type=int, default=0, help="level of detail of --mesh: 0 full, 1, 2, ... 16 coarsest")
+    p.add_argument("--lod", type=int, default=None, help="level of detail of --mesh: 0 full, 1, 2, ... 16 coarsest")
     p.add_argument("--leaf-off", action="store_true", help="scan without leaves")
     p.add_argument("--missing-sector", type=float, default=0.0, metavar="DEG",
                    help="drop the points in an azimuth wedge this many degrees wide")  # fmt: skip
@@ -69,11 +69,12 @@ MAX_POINTS = 5_000_000
 
 
 def _check(args: argparse.Namespace) -> None:
-    """Every argument checked before any work: numbers first, then the output paths."""
+    """Every argument checked before any work: the model's options, numbers, then the output paths."""
     from arboretum_library.checks import check_number, check_seed
     from arboretum_library.pointio import WRITERS
     from arboretum_server.mesh.lod import check_lod
 
+    _check_model_options(args)
     min_points = min_scan_points()
     if args.points < min_points:
         raise InputError(f"--points: must be >= {min_points} (the fewest 'arboretum decompose' takes), "
@@ -90,7 +91,7 @@ def _check(args: argparse.Namespace) -> None:
     if args.nodes is not None and not 500 <= args.nodes <= MAX_NODES:
         raise InputError(f"--nodes: must be 500..{MAX_NODES:,}, got {args.nodes:,}")
     check_seed(args.seed)
-    check_lod(args.lod)
+    check_lod(args.lod or 0)
     if args.mesh is not None and args.mesh.suffix.lower() not in MESH_FORMATS:
         raise InputError(f"--mesh {args.mesh}: write .glb, .obj or .ply")
     if args.truth is not None and args.truth.suffix.lower() != ".npz":
@@ -100,6 +101,21 @@ def _check(args: argparse.Namespace) -> None:
         check_output(args.truth, "--truth", outputs=[args.out], suffixes=(".npz",))
     if args.mesh is not None:
         check_output(args.mesh, "--mesh", outputs=[args.out, args.truth], suffixes=MESH_FORMATS)
+
+
+def _check_model_options(args: argparse.Namespace) -> None:
+    """Refuse options that would do nothing; fill in the guiding model's default species."""
+    if args.model == "harmonic":
+        from .harmonic import SPECIES
+
+        if args.species is None:
+            raise InputError(f"--model harmonic needs --species NAME, one of: {', '.join(sorted(SPECIES))}")
+        if args.nodes is not None:
+            raise InputError(f"--nodes {args.nodes}: sets the guiding model's graph; the harmonic model has none")
+    elif args.species is None:
+        args.species = "default"
+    if args.lod is not None and args.mesh is None:
+        raise InputError(f"--lod {args.lod}: sets the level of detail of --mesh; give --mesh too")
 
 
 def min_scan_points() -> int:
@@ -168,7 +184,7 @@ def run(args: argparse.Namespace) -> int:
         from arboretum_server.mesh.lod import LodOptions
         from arboretum_server.mesh.scene import truth_mesh
 
-        mesh = truth_mesh(truth, LodOptions(level=args.lod))
+        mesh = truth_mesh(truth, LodOptions(level=args.lod or 0))
         write_mesh(args.mesh, mesh)
         triangles = mesh.triangles
     summary = {

@@ -163,9 +163,11 @@ class CsrGraph:
 
     @classmethod
     def of(cls, g: YaoGraph) -> CsrGraph:
+        from .interrupt import interruptible
         from .kernels import csr_edges
 
-        indptr, cols, edge = csr_edges(g.neighbours, g.vectors, g.lengths)
+        with interruptible():
+            indptr, cols, edge = csr_edges(g.neighbours, g.vectors, g.lengths)
         px, py = (np.ascontiguousarray(g.points[:, i]) for i in range(2))
         return cls(indptr, cols, edge, px, py)
 
@@ -181,6 +183,7 @@ def lazy_search(
     targets: np.ndarray | None = None,
 ) -> Search:
     """``lazy_dijkstra`` in compiled code: the same arguments (with ``cg`` for the graph) and result."""
+    from .interrupt import interruptible
     from .kernels import lazy_search as kernel
 
     n = len(cg.px)
@@ -193,10 +196,11 @@ def lazy_search(
         want[np.asarray(targets, np.int64)] = True
         left = int(want.sum())
     th, ph = np.array(theta, np.float64), np.array(phi, np.float64)
-    par, hops, org, cost, done = kernel(
-        cg.indptr, cg.cols, cg.edge, cg.px, cg.py, np.asarray(sources, np.int64),
-        th, ph, near, far, float(h0), field, want, left,
-    )  # fmt: skip
+    with interruptible():
+        par, hops, org, cost, done = kernel(
+            cg.indptr, cg.cols, cg.edge, cg.px, cg.py, np.asarray(sources, np.int64),
+            th, ph, near, far, float(h0), field, want, left,
+        )  # fmt: skip
     return Search(par, hops, th, ph, org, cost, done)
 
 

@@ -28,6 +28,7 @@ def poisson_disc(lo: np.ndarray, hi: np.ndarray, r: float, rng: np.random.Genera
 
     Same generator state, same points. M is about ``DENSITY * volume / r**3``.
     """
+    from .interrupt import interruptible
     from .kernels import throw_darts
 
     lo = np.asarray(lo, dtype=np.float64)
@@ -35,7 +36,9 @@ def poisson_disc(lo: np.ndarray, hi: np.ndarray, r: float, rng: np.random.Genera
     m = max(int(OVERSAMPLE * np.prod(hi - lo) / r**3), 1)
     darts = lo + rng.random((m, 3)) * (hi - lo)
     prio = rng.permutation(m)
-    return darts[throw_darts(darts, prio, lo, r)]
+    with interruptible():
+        keep = throw_darts(darts, prio, lo, r)
+    return darts[keep]
 
 
 def first_independent_set(prio: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -124,11 +124,38 @@ class SpeciesParams:
 
 
 def species_from_dict(data: Mapping[str, Any]) -> SpeciesParams:
-    """``SpeciesParams`` from ``to_dict`` output (e.g. ``TreeTruth.parameters``); unknown keys ignored."""
+    """``SpeciesParams`` from ``to_dict`` output (e.g. ``TreeTruth.parameters``); unknown keys ignored.
+
+    A whole number written as an int (``82``, not ``82.0``) stays an int, also in a float field: the
+    presets hold such ints, and ``individual`` rounds ints, so converting them to floats would grow a
+    different tree from the same seed. The result therefore grows the same tree as the parameters that
+    were saved.
+    """
     try:
-        return unflatten(SpeciesParams, dict(data), {})
+        params = unflatten(SpeciesParams, _as_lists(data), {})
     except ValidationError as exc:
         raise InputError(f"harmonic species parameters: {exc}") from None
+    return _keep_ints(params, data)
+
+
+def _as_lists(data: Any) -> Any:
+    """``data`` with its tuples (as ``to_dict`` leaves them) turned into lists (as JSON gives them)."""
+    if isinstance(data, Mapping):
+        return {k: _as_lists(v) for k, v in data.items()}
+    return [_as_lists(v) for v in data] if isinstance(data, tuple | list) else data
+
+
+def _keep_ints(obj: Any, data: Any) -> Any:
+    """``obj`` (a parameters dataclass, tuple or number) with the ints of ``data`` (its dict) restored."""
+    if dataclasses.is_dataclass(obj) and isinstance(data, Mapping):
+        changes = {f.name: _keep_ints(getattr(obj, f.name), data[f.name])
+                   for f in dataclasses.fields(obj) if f.name in data}  # fmt: skip
+        return dataclasses.replace(obj, **changes)
+    if isinstance(obj, tuple) and isinstance(data, list | tuple) and len(obj) == len(data):
+        return tuple(_keep_ints(o, d) for o, d in zip(obj, data))
+    if type(data) is int and type(obj) is float and obj == data:
+        return data
+    return obj
 
 
 def _fail(where: str, what: str) -> None:

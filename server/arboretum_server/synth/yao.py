@@ -100,10 +100,13 @@ def yao_graph(points: np.ndarray, sectors: int = 14, k: int = 24, workers: int =
     """Build the Yao graph of ``points`` (N, 3) with ``sectors`` cones, searching the ``k`` nearest."""
     if sectors not in SECTOR_COUNTS:
         raise ValueError(f"sectors must be one of {SECTOR_COUNTS}, got {sectors}")
+    from .interrupt import interruptible
     from .kernels import knn, yao_select
 
     points = np.ascontiguousarray(points, dtype=np.float64)
     k = min(k, len(points) - 1)
-    nb = knn(points, k, _cell_size(points))
-    out, vec, length = yao_select(points, nb, sectors, _LOOKUP.get(sectors, _NONE))
+    size, lookup = _cell_size(points), _LOOKUP.get(sectors, _NONE)
+    with interruptible():
+        nb = knn(points, k, size)
+        out, vec, length = yao_select(points, nb, sectors, lookup)
     return YaoGraph(points, out, vec, length)
