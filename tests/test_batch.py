@@ -17,7 +17,7 @@ from arboretum_library.pointio import write_points
 from arboretum_library.store import Library
 from arboretum_server.batch.build import BuildOptions, build_library, expand_scans, species_for
 from arboretum_server.batch.plots import nice_ticks
-from arboretum_server.batch.report import write_report
+from arboretum_server.batch.report import _cell, write_report
 from arboretum_server.batch.synthetic import synthetic_scans
 from arboretum_server.batch.tasks import SCAN_EXAMPLES_KEY
 from arboretum_server.decompose.examples import file_sha256
@@ -86,17 +86,24 @@ def test_rerun_skips_done_scans_without_a_cluster(built, scans, monkeypatch):
     assert _examples_per_source(lib) == before
 
 
-def test_half_stored_scan_is_redone(scans, tmp_path):
+def test_damaged_scan_is_redone_and_a_pruned_one_kept(scans, tmp_path):
+    # a scan's examples are stored all or none (Library.add_new), so fewer than its scan_examples means
+    # some were deleted (kept so), or quarantined as torn after a power loss (the scan is done again)
+    import shutil
+
     lib = tmp_path / "lib"
     good = [str(p) for p in scans["good"][:2]]
     build_library(good, lib, OPTS)
-    sha = file_sha256(good[0])
+    sha, pruned = file_sha256(good[0]), file_sha256(good[1])
     with Library.open(lib) as L:
-        ids = L.find_source(sha)
-        L.delete(ids[-1])  # as if the build had been killed while storing this scan
+        ids, kept = L.find_source(sha), L.find_source(pruned)[1:]
+        (lib / "quarantine").mkdir()
+        shutil.copytree(lib / "examples" / ids[-1], lib / "quarantine" / f"{ids[-1]}-12345678")
+        L.delete(ids[-1])
+        L.delete(L.find_source(pruned)[0])  # the user prunes an example
     again = build_library(good, lib, OPTS)
     assert again.redone == 1 and again.count("added") == 1 and again.count("skipped") == 1
-    assert len(_examples_per_source(lib)[sha]) == len(ids)
+    assert len(_examples_per_source(lib)[sha]) == len(ids) and _examples_per_source(lib)[pruned] == kept
 
 
 def test_existing_scheduler_and_duplicates(scans, tmp_path):
@@ -251,8 +258,9 @@ def test_workers_start_without_a_trim_threshold_left_in_the_parent(monkeypatch):
 def test_a_scan_with_notes_carries_them_into_the_report(tmp_path):
     # a pole decomposes (its branches lie along it) but gets a note, which a library build of thousands
     # of scans dropped: the record, report.json, report.md and the command's text now carry it
-    from arboretum_server.batch.build import BuildResult, ScanRecord, _plan, _store
+    from arboretum_server.batch.build import BuildResult, ScanRecord, _store
     from arboretum_server.batch.cli import _text
+    from arboretum_server.batch.plan import plan
     from arboretum_server.batch.report import as_dict
     from arboretum_server.batch.tasks import decompose_scan
 
@@ -273,10 +281,11 @@ def test_a_scan_with_notes_carries_them_into_the_report(tmp_path):
     text = _text({**as_dict(result), "report": files})
     assert f"  note: {pole}: the cloud is nearly a straight line" in text
     # a rerun skips the scan and reports its notes again, read back from the library
-    again = ScanRecord(str(pole), "my|species\nname")
+    again = ScanRecord(str(pole), "unknown")
     with Library.open(tmp_path / "lib") as lib:
-        assert _plan(lib, [again], BuildResult(str(tmp_path / "lib"), [again])) == []
+        assert plan(lib, [again]) == []
     assert again.status == "skipped" and again.notes == list(out.notes)
     files = write_report(BuildResult(str(tmp_path / "lib"), [again]), tmp_path / "rep2")
     row = [line for line in Path(files["markdown"]).read_text().splitlines() if "pole.xyz" in line]
-    assert len(row) == 1 and "my\\|species name" in row[0] and "nearly a straight line" in row[0]
+    assert len(row) == 1 and "| unknown |" in row[0] and "nearly a straight line" in row[0]
+    assert _cell("my|species\nname") == "my\\|species name"

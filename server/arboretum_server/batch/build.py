@@ -2,17 +2,18 @@
 
 Order of work:
 
-1. Every scan is hashed (SHA-256 of its bytes) in the client. A scan whose examples are all in the
-   library already (``Library.find_source`` finds as many as its provenance's ``scan_examples``) is
-   skipped; a scan found only in part (a build killed while storing it) has those examples deleted and
-   is done again. Scans of equal content given twice are done once.
+1. Every scan is hashed (SHA-256 of its bytes) in the client. A scan with examples in the library
+   already (``Library.find_source``) is skipped, its record naming what is stored, with notes when
+   examples were deleted since, were made with other options, or a file of the same name with other
+   contents has examples too (``plan.py``); with ``rebuild`` it is done again instead. Scans of equal
+   content given twice are done once.
 2. One task per remaining scan (``tasks.decompose_scan``) goes to the cluster: a ``LocalCluster`` of
    ``workers`` single-threaded processes, or the scheduler at ``scheduler`` (``tcp://HOST:8786``).
-3. As each future completes, the client stores that scan's examples (each write atomic, under the
-   library's lock), so killing the build loses only the scans still in flight. Writes are not fsynced
+3. As each future completes, the client stores that scan's examples (all or none, ``Library.add_new``,
+   under the library's lock), so killing the build loses only the scans still in flight. Writes are not fsynced
    one by one (one ``os.sync`` at the end): a process kill loses nothing stored, and after a power
-   loss a torn example folder is quarantined when the library is next opened, which makes its scan
-   incomplete, so the next build does it again.
+   loss a torn example folder is quarantined when the library is next opened; the next build finds it
+   there and does its scan again.
 
 A scan that cannot be read, is empty or holds no tree is reported (``ScanRecord.error``) and skipped.
 """
@@ -30,19 +31,14 @@ from pathlib import Path
 from typing import Any
 
 from arboretum_library.errors import InputError
-from arboretum_library.pointio import READERS
-from arboretum_library.pointio_formats import sniff_not_points
 from arboretum_library.progress import ProgressFn, no_progress
 
-from .tasks import (
-    MALLOC_STATIC,
-    NOTES_KEY,
-    SCAN_EXAMPLES_KEY,
-    WORKER_CONFIG,
-    WORKER_ENV,
-    ScanOutcome,
-    decompose_scan,
-)
+from .plan import plan, scan_stem
+from .scans import expand_scans
+from .tasks import MALLOC_STATIC, WORKER_CONFIG, WORKER_ENV, ScanOutcome, decompose_scan
+from .waiting import Waiting, completed
+
+__all__ = ["BuildOptions", "BuildResult", "ScanRecord", "build_library", "expand_scans", "species_for"]
 
 
 @dataclass(frozen=True)
@@ -62,10 +58,18 @@ class BuildOptions:
     """Decomposition: output height, metres (VRTree: 0.8)."""
     seed: int = 0
     """Decomposition seed (downsampling, FPS, k-means)."""
+    rebuild: bool = False
+    """Decompose scans already in the library again (this run's options), replacing their examples."""
+    recursive: bool = False
+    """Folders given: take the point-cloud files of every folder below them too."""
+    worker_timeout: float | None = None
+    """Give up (``InputError``) when the cluster has had no worker for this many seconds; None waits."""
 
     def __post_init__(self) -> None:
         if self.workers < 1:
             raise InputError(f"--workers must be at least 1, got {self.workers}")
+        if self.worker_timeout is not None and not self.worker_timeout > 0:
+            raise InputError(f"--worker-timeout must be a number of seconds > 0, got {self.worker_timeout}")
         if self.scheduler is not None and "://" not in self.scheduler:
             raise InputError(f"--scheduler must be an address like tcp://HOST:8786, got {self.scheduler!r}")
 
@@ -85,7 +89,10 @@ class ScanRecord:
     seconds: dict[str, float] = field(default_factory=dict)
     stats: dict[str, Any] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
-    """The decomposition's notes (a second trunk, a straight line, all foliage, counts not met)."""
+    """The decomposition's notes (a second trunk, a straight line, all foliage, counts not met), and
+    the build's about what is stored (``plan.py``)."""
+    replace: list[str] = field(default_factory=list)
+    """Ids of stored examples of this scan that its new examples replace (``rebuild``, damaged)."""
 
 
 @dataclass
@@ -98,40 +105,13 @@ class BuildResult:
     cluster: str = ""
     workers: int = 0
     redone: int = 0
-    """Scans found only in part and done again."""
+    """Scans in the library done again and stored (``rebuild``, or examples of it found damaged)."""
     ignored: list[tuple[str, str]] = field(default_factory=list)
-    """(path, why) of the files left out as recognisably not point clouds (``expand_scans``)."""
+    """(path, why) of the files left out as recognisably not point clouds, and of subfolders holding
+    point clouds not read (``expand_scans``)."""
 
     def count(self, status: str) -> int:
         return sum(r.status == status for r in self.records)
-
-
-def expand_scans(paths: list[str], ignored: list[tuple[str, str]] | None = None) -> list[str]:
-    """Files as given; folders replaced by their point-cloud files (known suffixes), sorted. Files that
-    are recognisably not point clouds (``sniff_not_points``: a TreeQSM cylinder table, a licence) are
-    left out and appended to ``ignored`` as (path, why). ``InputError`` for a path that does not exist."""
-    out: list[str] = []
-    left_out: list[tuple[str, str]] = []
-    for p in paths:
-        path = Path(p)
-        if path.is_dir():
-            files = [f for f in sorted(path.iterdir()) if f.is_file() and f.suffix.lower() in READERS]
-        elif path.exists():
-            files = [path]
-        else:
-            raise InputError(f"SCAN {p}: no such file or folder")
-        for f in files:
-            name, why = str(f) if path.is_dir() else str(p), sniff_not_points(f)
-            if why is None:
-                out.append(name)
-            else:
-                left_out.append((name, why))
-    if not out:
-        reason = f": {left_out[0][0]} {left_out[0][1]}" if left_out else " (the folders hold no point-cloud files)"
-        raise InputError(f"no scans given{reason}")
-    if ignored is not None:
-        ignored.extend(left_out)
-    return out
 
 
 def species_for(path: str, given: str | None) -> str:
@@ -152,57 +132,24 @@ def build_library(scans: list[str], library: str | os.PathLike, options: BuildOp
 
     t0 = time.perf_counter()
     ignored: list[tuple[str, str]] = []
-    records = [ScanRecord(p, species_for(p, options.species)) for p in expand_scans(scans, ignored)]
+    files = expand_scans(scans, ignored, options.recursive)
+    records = [ScanRecord(p, species_for(p, options.species)) for p in files]
     result = BuildResult(str(library), records, ignored=ignored)
     with Library.open(library, create=True, fsync=False) as lib:
-        todo = _plan(lib, records, result)
+        todo = plan(lib, records, options)
         progress(0, max(len(todo), 1), _status(result, 0, len(todo)))
         try:
             if todo:
                 _run_cluster(lib, todo, options, result, progress)
         finally:
             os.sync()  # one flush for the whole build instead of one per file
+    result.redone = sum(bool(r.replace) and r.status == "added" for r in records)
     result.wall_seconds = time.perf_counter() - t0
     return result
 
 
-def _plan(lib, records: list[ScanRecord], result: BuildResult) -> list[ScanRecord]:
-    """Hash every scan; mark failed/skipped/duplicate ones; clear partly stored scans. Returns the rest."""
-    from arboretum_server.decompose.examples import file_sha256
-
-    seen: set[str] = set()
-    todo = []
-    for r in records:
-        try:
-            r.sha256 = file_sha256(r.path)
-        except OSError as exc:
-            r.status, r.error = "failed", f"cannot read the file ({exc.strerror or exc})"
-            continue
-        if r.sha256 in seen:
-            r.status = "duplicate"
-            continue
-        seen.add(r.sha256)
-        ids = lib.find_source(r.sha256)
-        if ids and _complete(lib, ids):
-            r.status, r.examples = "skipped", list(ids)
-            r.notes = list(lib.provenance(ids[0]).parameters.get(NOTES_KEY, []))
-            continue
-        for id_ in ids:  # a build was killed while storing this scan: start it again
-            lib.delete(id_)
-        result.redone += bool(ids)
-        todo.append(r)
-    return todo
-
-
-def _complete(lib, ids: list[str]) -> bool:
-    want = lib.provenance(ids[0]).parameters.get(SCAN_EXAMPLES_KEY)
-    return want is None or len(ids) >= int(want)
-
-
 def _run_cluster(lib, todo: list[ScanRecord], o: BuildOptions, result: BuildResult,
                  progress: ProgressFn) -> None:
-    from distributed import as_completed
-
     with _Cluster(o) as (client, name, n_workers):
         result.cluster, result.workers = name, n_workers
         by_key, futures = {}, []
@@ -212,10 +159,12 @@ def _run_cluster(lib, todo: list[ScanRecord], o: BuildOptions, result: BuildResu
             by_key[fut.key] = r
             futures.append(fut)
         try:
-            for done, fut in enumerate(as_completed(futures), 1):
+            waiting = Waiting(client, name, o, progress, lambda d, t: _status(result, d, t))
+            for done, fut in enumerate(completed(futures, waiting), 1):
                 _store(lib, by_key[fut.key], _outcome(fut))
                 fut.release()
                 progress(done, len(todo), _status(result, done, len(todo)))
+            result.workers = result.workers or len(client.nthreads())  # workers that joined late
         except BaseException:
             client.cancel(futures, force=True)
             raise
@@ -232,12 +181,14 @@ def _store(lib, r: ScanRecord, out: ScanOutcome | str) -> None:
     if isinstance(out, str):
         r.status, r.error = "failed", out
         return
-    r.seconds, r.stats, r.notes = out.seconds, out.stats, list(out.notes)
+    r.seconds, r.stats, r.notes = out.seconds, out.stats, [*out.notes, *r.notes]  # the plan's notes last
     if out.error:
         r.status, r.error = "failed", out.error
         return
-    stem = "".join(c if c.isalnum() or c in "-_" else "-" for c in Path(r.path).stem) or "scan"
-    r.examples.extend(e.id for e in lib.add_new(out.examples, stem))  # ids picked under the lock, all or none
+    for id_ in r.replace:  # its examples of an earlier build (rebuild, damaged), deleted only now
+        if id_ in lib:
+            lib.delete(id_)
+    r.examples.extend(e.id for e in lib.add_new(out.examples, scan_stem(r.path)))  # all or none
     r.status = "added"
 
 
@@ -273,8 +224,11 @@ class _Cluster:
         self.hidden = {k: os.environ.pop(k) for k in MALLOC_STATIC if k in os.environ}
         with dask.config.set({"distributed.nanny.pre-spawn-environ": dict(WORKER_ENV), **WORKER_CONFIG}), \
                 _workers_ignore_sigint():
+            # no dashboard; the scheduler's HTTP server (health, metrics) on a free port, so that another
+            # cluster on port 8787 brings no "Port 8787 is already in use" warning
             self.cluster = LocalCluster(n_workers=self.o.workers, threads_per_worker=1, processes=True,
-                                        dashboard_address=None)
+                                        dashboard_address=None,
+                                        scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
         self.client = Client(self.cluster)
         return self.client, "LocalCluster", self.o.workers
 

@@ -1,13 +1,17 @@
 """``arboretum library build``: decompose many scans in parallel (Dask) into an example library.
 
     arboretum library build SCANS... --library LIB [--species S] [--workers N]
-        [--scheduler tcp://HOST:8786] [--report DIR] [--points 12000] [--height 0.8] [--seed 0] [--json]
+        [--scheduler tcp://HOST:8786 [--worker-timeout S]] [--report DIR] [--recursive] [--rebuild]
+        [--points 12000] [--height 0.8] [--seed 0] [--json]
 
-SCANS are files or folders (every point-cloud file inside; files that are recognisably not point clouds,
-such as TreeQSM cylinder tables, are left out with a note). Run it again after an interruption: scans
-already in the library are skipped. Exit status: 0 when every scan was stored (or already there), 1 when
-any scan failed (the others are stored), 2 for a mistake in the arguments, 130 after Ctrl-C. A library
-this build created is removed again when nothing was stored in it. See docs/batch.md.
+SCANS are files or folders (every point-cloud file inside, and with --recursive in the folders below;
+files that are recognisably not point clouds, such as TreeQSM cylinder tables, are left out with a
+note). Run it again after an interruption: scans already in the library are skipped (examples deleted
+since stay deleted; a note says when they were made with other options); --rebuild decomposes them
+again with this run's options and replaces their examples. Exit status: 0 when every scan was stored
+(or already there), 1 when any scan failed (the others are stored), 2 for a mistake in the arguments,
+130 after Ctrl-C. A library this build created is removed again when nothing was stored in it. See
+docs/batch.md.
 """
 
 from __future__ import annotations
@@ -31,6 +35,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--points", type=int, default=12000, metavar="N", help="downsample each scan (0: all)")
     p.add_argument("--height", type=float, default=0.8, metavar="M", help="output height in metres")
     p.add_argument("--seed", type=int, default=0, help="decomposition seed")
+    p.add_argument("--recursive", action="store_true", help="folders: read the folders below them too")
+    p.add_argument("--rebuild", action="store_true",
+                   help="decompose scans already in the library again, replacing their examples")
+    p.add_argument("--worker-timeout", type=float, metavar="S",
+                   help="with --scheduler: give up after S seconds without any worker (default: wait)")
     add_json_flag(p)
     p.set_defaults(func=run)
 
@@ -72,8 +81,9 @@ def run(args: argparse.Namespace) -> int:
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     folder = check_args(args)
     opts = BuildOptions(species=args.species, workers=args.workers, scheduler=args.scheduler,
-                        points=args.points, height=args.height, seed=args.seed)
-    status = StatusLine() if not args.json else (lambda *a: None)
+                        points=args.points, height=args.height, seed=args.seed, rebuild=args.rebuild,
+                        recursive=args.recursive, worker_timeout=args.worker_timeout)
+    status = StatusLine() if not args.json else _waiting_on_stderr()
     created = not Path(args.library).exists()
     try:
         result = build_library(args.scans, args.library, opts, status)
@@ -102,9 +112,24 @@ def drop_if_empty(library: str) -> bool:
     return True
 
 
+def _waiting_on_stderr():
+    """With --json (no status line): a progress function printing only "waiting: ..." to stderr, once."""
+    import sys
+
+    said: set[str] = set()
+
+    def progress(done: int, total: int, message: str = "") -> None:
+        if message.startswith("waiting") and message not in said:
+            said.add(message)
+            print(message, file=sys.stderr, flush=True)
+
+    return progress
+
+
 def _text(d: dict) -> str:
-    lines = [f"{d['library']}: {d['added']} scans added ({d['examples_added']} examples), {d['skipped']} "
-             f"already there, {d['duplicate']} duplicates, {d['failed']} failed, in {d['wall_seconds']:.1f} s "
+    redone = f"; {d['redone']} of them done again: --rebuild, or damaged" if d.get("redone") else ""
+    lines = [f"{d['library']}: {d['added']} scans added ({d['examples_added']} examples{redone}), "
+             f"{d['skipped']} already there, {d['duplicate']} duplicates, {d['failed']} failed, in {d['wall_seconds']:.1f} s "
              f"on {d['workers']} workers ({d['cluster'] or 'no cluster needed'})"]
     lines += [f"  failed: {r['path']}: {r['error']}" for r in d["records"] if r["status"] == "failed"]
     lines += [f"  note: {r['path']}: {n}" for r in d["records"] for n in r["notes"]]

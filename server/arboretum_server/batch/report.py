@@ -109,7 +109,7 @@ def markdown(data: dict[str, Any], plots: dict[str, str]) -> str:
         f"- cluster: {data['cluster'] or '(none needed)'}, {data['workers']} workers",
         f"- scans: {data['scans']} given; {data['added']} added ({data['examples_added']} examples), "
         f"{data['skipped']} already in the library, {data['duplicate']} duplicates, {data['failed']} failed"
-        + (f"; {data['redone']} found half-stored and redone" if data["redone"] else ""),
+        + (f"; {data['redone']} in the library done again (--rebuild, or damaged)" if data["redone"] else ""),
         f"- time: {data['wall_seconds']:.1f} s wall, {data['worker_seconds']:.1f} s of worker time "
         f"({speed:.2f}x)", "",
     ]
@@ -126,7 +126,7 @@ def markdown(data: dict[str, Any], plots: dict[str, str]) -> str:
                      f"{len(r['examples'])} | {r['points'] if r['points'] is not None else ''} | "
                      f"{'' if secs is None else f'{secs:.2f}'} | {_cell(note)} |")
     if data.get("ignored"):
-        lines += ["", "Left out (not point clouds):", ""]
+        lines += ["", "Left out (not point clouds, or subfolders not read):", ""]
         lines += [f"- {_cell(Path(i['path']).name)}: {_cell(i['why'])}" for i in data["ignored"]]
     return "\n".join(lines) + "\n"
 

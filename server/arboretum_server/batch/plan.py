@@ -1,0 +1,135 @@
+"""What a build does with each scan, decided from the library before any worker starts.
+
+A scan (by the SHA-256 of its bytes) with examples in the library is *skipped*, and its record shows what
+is stored: the stored species and notes, plus a note when
+
+- some of its examples are gone (``scan_examples`` in the provenance says how many it gave). A scan's
+  examples are stored all or none (``Library.add_new``, one group journal that a crash rolls back), so a
+  shortfall means examples were removed afterwards, usually with ``arboretum library delete``: the build
+  keeps that pruning. Only when the library's ``quarantine/`` holds a damaged example of the scan (a torn
+  folder found after a power loss) is the scan done again (``redone``);
+- the stored examples were made with other options than this run's (species, points, height, seed);
+- the library also holds examples of another file of the same name with other contents (an earlier
+  version of an edited scan, or a namesake from another folder: the library keeps only file names, so
+  they are reported, never deleted).
+
+With ``rebuild`` every scan already in the library is decomposed again with this run's options; its old
+examples are deleted just before the new ones are stored (``build._store``), so a scan that fails keeps
+them.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from .tasks import NOTES_KEY, SCAN_EXAMPLES_KEY
+
+COMPARED = ("points", "height", "seed")
+"""Decomposition options a build sets besides the species; a stored scan made with others gets a note."""
+
+
+def scan_stem(path: str) -> str:
+    """The id prefix of a scan's examples: its file stem made safe (``apple_1.xyz`` -> ``apple_1``)."""
+    return "".join(c if c.isalnum() or c in "-_" else "-" for c in Path(path).stem) or "scan"
+
+
+def plan(lib, records: list, options: Any = None) -> list:
+    """Hash every record's scan, set the status of those not to run (failed, duplicate, skipped) with
+    their notes, and mark those whose stored examples are to be replaced (``record.replace``). Returns the
+    records to decompose. ``options``: a ``BuildOptions`` (None: compare nothing, rebuild nothing)."""
+    from arboretum_server.decompose.examples import file_sha256
+
+    seen: set[str] = set()
+    todo = []
+    for r in records:
+        try:
+            r.sha256 = file_sha256(r.path)
+        except OSError as exc:
+            r.status, r.error = "failed", f"cannot read the file ({exc.strerror or exc})"
+            continue
+        if r.sha256 in seen:
+            r.status = "duplicate"
+            continue
+        seen.add(r.sha256)
+        ids = lib.find_source(r.sha256)
+        if ids and (getattr(options, "rebuild", False) or _damaged(lib, r, ids)):
+            r.replace = list(ids)  # counted in BuildResult.redone once stored (build_library)
+        elif ids:
+            _skip(lib, r, ids, options)
+            continue
+        todo.append(r)
+    _namesakes(lib, records, seen)
+    return todo
+
+
+def _skip(lib, r, ids: list[str], options: Any) -> None:
+    prov = lib.provenance(ids[0])
+    params = prov.parameters
+    r.status, r.examples = "skipped", list(ids)
+    r.notes = list(params.get(NOTES_KEY, []))
+    want = params.get(SCAN_EXAMPLES_KEY)
+    if want is not None and len(ids) < int(want):
+        r.notes.append(f"{int(want) - len(ids)} of its {int(want)} examples are no longer in the library "
+                       "(deleted since it was built): kept so; --rebuild makes them all again")
+    differ = [("species", prov.species, r.species)] if options is not None and prov.species != r.species else []
+    differ += [(k, params.get(k), getattr(options, k)) for k in COMPARED
+               if options is not None and k in params and params.get(k) != getattr(options, k)]
+    r.species = prov.species  # what is stored, not what this run would have made
+    if differ:
+        was = ", ".join(f"--{k} {old}" for k, old, _ in differ)
+        now = ", ".join(f"--{k} {new}" for k, _, new in differ)
+        r.notes.append(f"its {len(ids)} examples were made with {was}, not this run's {now}: left as they "
+                       "are; --rebuild decomposes it again with this run's options (or delete them: "
+                       "arboretum library delete)")
+
+
+def _damaged(lib, r, ids: list[str]) -> bool:
+    """Whether the scan lost examples to ``quarantine/`` (damaged folders found when the library was
+    opened after a crash): a quarantined folder of this scan (by its provenance, or by its id's prefix
+    when its meta.json is unreadable) whose id is no longer in the library, moved there after the scan's
+    examples were stored (an older one was handled by an earlier build, which stored them again)."""
+    from arboretum_library.folders import read_provenance
+
+    want = lib.provenance(ids[0]).parameters.get(SCAN_EXAMPLES_KEY)
+    qdir = Path(lib.root) / "quarantine"
+    if want is None or len(ids) >= int(want) or not qdir.is_dir():
+        return False
+    stem = scan_stem(r.path)
+    stored = max((_ctime(Path(lib.root) / "examples" / i) for i in ids), default=0.0)
+    for folder in qdir.iterdir():
+        id_ = folder.name.rsplit("-", 1)[0]
+        if id_ in ids or id_ in lib or not id_.startswith(f"{stem}-") or _ctime(folder) < stored:
+            continue  # not this scan's, or quarantined before its examples were (re)stored
+        try:
+            sha = read_provenance(folder).source_sha256
+        except Exception:  # torn beyond reading: its name is all there is
+            return True
+        if sha == r.sha256:
+            return True
+    return False
+
+
+def _ctime(path: Path) -> float:
+    """When ``path`` was last renamed or changed (0 when it is gone)."""
+    try:
+        return path.stat().st_ctime
+    except OSError:
+        return 0.0
+
+
+def _namesakes(lib, records: list, given: set[str]) -> None:
+    """Note, on every record, examples in the library from a file of the same name whose contents are
+    not among the scans given (an earlier version of an edited scan: stale; or a namesake elsewhere)."""
+    by_name: dict[str, dict[str, list[str]]] = {}
+    for e in lib.entries():
+        by_name.setdefault(e.source, {}).setdefault(e.source_sha256, []).append(e.id)
+    for r in records:
+        other = {sha: ids for sha, ids in by_name.get(Path(r.path).name, {}).items() if sha not in given}
+        if not other or not r.sha256:
+            continue
+        ids = sorted(i for group in other.values() for i in group)
+        shown = " ".join(ids[:4]) + (" ..." if len(ids) > 4 else "")
+        r.notes.append(f"the library also holds {len(ids)} examples of a file named {Path(r.path).name} "
+                       f"with other contents ({shown}): an earlier version of this scan? They are kept; "
+                       "if stale, delete them: arboretum library delete LIB ID")
