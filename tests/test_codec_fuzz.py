@@ -96,6 +96,11 @@ CASES = [
      OverflowError, "too large"),
     ("negative shape", _zip({"a.npy": _npy(_header("(-5,)"))}), ValueError, "negative"),
     ("object dtype", _zip({"a.npy": _npy(_header("(3,)", "'|O'"))}), ValueError, "allow_pickle"),
+    ("descr an empty tuple", _zip({"a.npy": _npy(_header("(1,)", "()"))}), IndexError, "out of range"),
+    ("descr field an empty tuple", _zip({"a.npy": _npy(_header("(1,)", "[('a', ())]"))}), IndexError,
+     "out of range"),
+    ("descr a tuple of a tuple", _zip({"a.npy": _npy(_header("(1,)", "(('<f8', (2,)),)"))}), IndexError,
+     "out of range"),
     ("unhashable header key", _zip({"a.npy": _npy(b"{[1]: 2}\n")}), TypeError, "unhashable"),
     ("header indentation", _zip({"a.npy": _npy(b"a\n    b\n  c\n")}), SyntaxError, "indent"),
     ("header never closes", _zip({"a.npy": _npy(b"(" * 300 + b"\n")}), tokenize.TokenError,
@@ -170,3 +175,15 @@ def test_random_cuts_and_flips_read_or_refuse(compress):
             assert all(isinstance(v, np.ndarray) for v in arrays.values())
             outcomes["read"] += 1
     assert outcomes["read"] > 0 and outcomes["refused"] > len(cases) // 2, outcomes
+
+
+def test_a_record_file_with_an_empty_tuple_descr_is_one_input_error(tmp_path):
+    """``arboretum render`` and every record loader read through ``load_record``: no traceback."""
+    from arboretum_library.codec import load_record
+    from arboretum_library.errors import InputError
+    from arboretum_library.model import Assembly
+
+    path = tmp_path / "bad_record.npz"
+    path.write_bytes(_zip({"x.npy": _npy(_header("(1,)", "()"))}))
+    with pytest.raises(InputError, match="bad_record.npz: not a readable .npz"):
+        load_record(path, Assembly)

@@ -120,8 +120,8 @@ def arrays_to_npz(arrays: Mapping[str, np.ndarray], *, compress: bool = False) -
     return buf.getvalue()
 
 
-_DAMAGED = (ValueError, OSError, EOFError, TypeError, OverflowError, MemoryError, NotImplementedError,
-            SyntaxError, zlib.error, LZMAError, zipfile.BadZipFile, tokenize.TokenError)
+_DAMAGED = (ValueError, OSError, EOFError, TypeError, IndexError, OverflowError, MemoryError,
+            NotImplementedError, SyntaxError, zlib.error, LZMAError, zipfile.BadZipFile, tokenize.TokenError)
 """What reading a cut, corrupted or hostile .npz raises on numpy 2.4 / Python 3.11 (found by fuzzing,
 see tests/test_codec_fuzz.py):
 
@@ -129,7 +129,9 @@ see tests/test_codec_fuzz.py):
   compression method), ``zlib.error``, ``LZMAError``, ``OSError`` (bz2) or ``EOFError`` from a bad or
   short stream, ``ValueError`` (a negative seek), ``EOFError`` (no bytes at all);
 - a .npy header: ``ValueError`` (numpy's checks, text that does not decode), ``TypeError`` (an
-  unhashable dict key), ``SyntaxError``/``TokenError`` (numpy's header filter), ``OverflowError`` (a
+  unhashable dict key), ``IndexError`` (a ``descr`` that is an empty tuple or
+  holds one, e.g. ``()``, ``[('a', ())]`` or ``(('<f8', (2,)),)``: numpy's ``descr_to_dtype`` indexes
+  it), ``SyntaxError``/``TokenError`` (numpy's header filter), ``OverflowError`` (a
   dimension beyond int64) and ``MemoryError`` when it declares a shape of terabytes: numpy allocates the
   array before reading its bytes.
 
