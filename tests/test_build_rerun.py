@@ -4,7 +4,10 @@ mentioned (or read with --recursive), and a busy port 8787 brings no Dask warnin
 
 from __future__ import annotations
 
+import dataclasses
+import errno
 import json
+import logging
 import shutil
 import socket
 import warnings
@@ -16,11 +19,14 @@ import pytest
 from arboretum_library.errors import InputError
 from arboretum_library.pointio import read_points, write_points
 from arboretum_library.store import Library
-from arboretum_server.batch.build import BuildOptions, build_library, expand_scans
+from arboretum_server.batch import build as build_module
+from arboretum_server.batch.build import BuildOptions, ScanRecord, build_library, expand_scans
 from arboretum_server.batch.cli import _text
+from arboretum_server.batch.plan import plan, scan_stem
 from arboretum_server.batch.report import as_dict, write_report
 from arboretum_server.batch.synthetic import synthetic_scans
 from arboretum_server.batch.tasks import SCAN_EXAMPLES_KEY
+from arboretum_server.batch.waiting import Waiting
 from arboretum_server.decompose.examples import file_sha256
 
 POINTS = 1500
@@ -120,6 +126,7 @@ def test_rebuild_replaces_examples_with_this_runs_options(built, tmp_path, capsy
         params = [L.provenance(i).parameters for i in new]
         assert {p["seed"] for p in params} == {3} and params[0][SCAN_EXAMPLES_KEY] == len(new)
         assert L.find_source(file_sha256(scans[1])) == other  # scans not given are left alone
+    assert not set(new) & set(old)  # fresh ids: a session naming an old id never shows a new example
 
 
 def test_edited_scan_notes_the_stale_examples(tmp_path):
@@ -197,3 +204,118 @@ def test_busy_port_8787_brings_no_dask_warning():
     finally:
         busy.close()
     assert not [w for w in caught if "already in use" in str(w.message)]
+
+
+def test_rebuild_that_cannot_store_keeps_the_old_examples(built, tmp_path, monkeypatch):
+    lib, scans = _copy(built[0], tmp_path), built[1]
+    sha = file_sha256(scans[0])
+    old = _ids(lib, sha)
+
+    def disk_full(self, examples, prefix="ex"):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(Library, "add_new", disk_full)
+    with pytest.raises(OSError, match="No space left"):
+        build_library([str(scans[0])], lib, dataclasses.replace(OPTS, rebuild=True))
+    assert _ids(lib, sha) == old and len(old) >= 2
+    with Library.open(lib, readonly=True) as L:
+        assert [L.get(i).id for i in old] == old
+
+
+def test_rebuild_stopped_while_deleting_the_old_examples_loses_none(built, tmp_path, monkeypatch):
+    lib, scans = _copy(built[0], tmp_path), built[1]
+    sha = file_sha256(scans[0])
+    old = _ids(lib, sha)
+    real_delete, calls = Library.delete, []
+
+    def delete(self, id_):
+        calls.append(id_)
+        if len(calls) == 2:
+            raise KeyboardInterrupt  # Ctrl-C between two deletions
+        real_delete(self, id_)
+
+    monkeypatch.setattr(Library, "delete", delete)
+    level = logging.getLogger("distributed").level
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            build_library([str(scans[0])], lib, dataclasses.replace(OPTS, rebuild=True))
+    finally:
+        logging.getLogger("distributed").setLevel(level)  # the build quietens Dask after a Ctrl-C
+    monkeypatch.setattr(Library, "delete", real_delete)
+    held = _ids(lib, sha)
+    new = [i for i in held if i not in old]
+    assert calls == old[:2] and [i for i in held if i in old] == old[1:] and len(new) == len(old)
+    again = build_library([str(scans[0])], lib, OPTS)  # not "pruned by the user": says what happened
+    rec = again.records[0]
+    assert rec.status == "skipped" and again.redone == 0 and rec.examples == held
+    assert rec.notes == [f"the library holds {len(held)} examples of it, not the {len(old)} it gives: a "
+                         "--rebuild stopped while deleting the old ones; --rebuild again replaces them all"]
+    third = build_library([str(scans[0])], lib, dataclasses.replace(OPTS, rebuild=True))
+    now = _ids(lib, sha)
+    assert third.redone == 1 and len(now) == len(old) and not set(now) & set(held)
+
+
+def test_quarantined_id_is_matched_by_stem_and_never_reused(built, tmp_path):
+    """A scan named 'apple tree (2).xyz': the plan's stem is the prefix ``add_new`` gives its ids, so a
+    quarantined example is found; and a namesake stored afterwards does not take the quarantined id."""
+    lib, scans = _copy(built[0], tmp_path), built[1]
+    named = tmp_path / "apple tree (2).xyz"
+    shutil.copyfile(scans[0], named)
+    sha = file_sha256(named)
+    with Library.open(lib, fsync=False) as L:
+        examples = [L.get(i) for i in L.find_source(sha)]
+        for e in examples:
+            L.delete(e.id)
+        ids = [e.id for e in L.add_new(examples, named.stem)]
+        assert scan_stem(str(named)) == "apple-tree--2" and ids[0] == "apple-tree--2-0001"
+        (lib / "quarantine").mkdir()
+        shutil.copytree(lib / "examples" / ids[-1], lib / "quarantine" / f"{ids[-1]}-0badf00d")
+        L.delete(ids[-1])  # a power loss tore it: the library moved it to quarantine/
+        other = dataclasses.replace(examples[0], provenance=dataclasses.replace(
+            examples[0].provenance, source_sha256="0" * 64))
+        taken = L.add_new([other], named.stem)[0].id  # a namesake scan from another plot
+        assert taken == f"apple-tree--2-{len(ids) + 1:04d}"
+        rec = ScanRecord(str(named), "apple")
+        assert plan(L, [rec], OPTS) == [rec] and rec.replace == ids[:-1]
+
+
+def test_torn_example_with_its_row_makes_its_scan_redone(built, tmp_path, monkeypatch):
+    lib, scans = _copy(built[0], tmp_path), built[1]
+    sha = file_sha256(scans[0])
+    old = _ids(lib, sha)
+    (lib / "examples" / old[1] / "arrays.npz").write_bytes(b"")  # its data never reached the disk
+    addresses = []
+
+    class Recorded(Waiting):
+        def __init__(self, client, address, *args):
+            addresses.append(address)
+            super().__init__(client, address, *args)
+
+    monkeypatch.setattr(build_module, "Waiting", Recorded)
+    again = build_library([str(p) for p in scans], lib, OPTS)
+    assert again.redone == 1 and [r.status for r in again.records] == ["added", "skipped"]
+    assert f"its example {old[1]} is damaged" in again.records[0].notes[-1]
+    now = _ids(lib, sha)
+    assert len(now) == len(old) and not set(now) & set(old) and again.records[0].examples == now
+    with Library.open(lib, readonly=True) as L:
+        assert [L.get(i).id for i in now] == now
+    assert addresses == [None]  # a LocalCluster: no "start some: dask worker LocalCluster" hint
+
+
+def test_local_cluster_without_workers_is_no_scheduler_to_start_workers_for(tmp_path, capsys):
+    class NoWorkers:
+        def nthreads(self):
+            return {}
+
+    seen: list[str] = []
+    Waiting(NoWorkers(), None, OPTS, lambda d, t, m="": seen.append(m), lambda d, t: "").check()
+    assert seen == ["waiting: the local cluster has 0 workers (a worker process is being restarted)"]
+    with pytest.raises(InputError, match=r"^--worker-timeout applies only with --scheduler"):
+        BuildOptions(worker_timeout=5)
+    from arboretum_library.cli import main
+
+    lib = tmp_path / "lib"
+    assert main(["library", "build", str(tmp_path), "--library", str(lib), "--worker-timeout", "5"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--worker-timeout applies only with --scheduler" in err[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # refused before anything was made

@@ -134,6 +134,25 @@ def test_info_find_source_and_new_id(lib):
     assert lib.new_id("oak tree") == "oak-tree-0001"
 
 
+def test_a_quarantined_examples_id_is_never_given_again(lib):
+    """A damaged folder moved to quarantine/ (``ID-HEX``, recovery) keeps its id: a later ``add_new`` of
+    the same prefix (a namesake scan) must not take it, or the build could no longer tell it is gone."""
+    from arboretum_library.folders import safe_prefix
+
+    added = lib.add_new(_examples(3), "oak tree (2)")
+    ids = [e.id for e in added]
+    assert ids == ["oak-tree--2-0001", "oak-tree--2-0002", "oak-tree--2-0003"]
+    assert all(i.startswith(safe_prefix("oak tree (2)") + "-") for i in ids)
+    assert safe_prefix("__a b__") == "a-b" and safe_prefix("()") == "ex" and len(safe_prefix("x" * 300)) == 110
+    (lib.root / "quarantine").mkdir()
+    (lib.root / "quarantine" / "oak-tree--2-0003-0badf00d").mkdir()
+    (lib.root / "quarantine" / "oak-tree--2-0009-00c0ffee").mkdir()  # quarantined long ago, still reserved
+    lib.delete(ids[-1])
+    again = lib.add_new(_examples(2, seed=7), "oak tree (2)")
+    assert [e.id for e in again] == ["oak-tree--2-0010", "oak-tree--2-0011"]
+    assert lib.new_id("pear") == "pear-0001"  # other prefixes are not affected
+
+
 # -- search --------------------------------------------------------------------------------------
 
 @pytest.fixture

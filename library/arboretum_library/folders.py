@@ -171,12 +171,23 @@ def check_marker(root: Path, create: bool) -> None:
         raise InputError(f"library {root} has schema {head.get('schema')!r}, newer than this Arboretum reads ({SCHEMA_VERSION})")
 
 
+def safe_prefix(text: str) -> str:
+    """``text`` made an id prefix: every character but letters, digits, '-' and '_' becomes '-', leading
+    and trailing '-'/'_' are stripped, at most 110 characters; 'ex' when nothing is left
+    (``apple tree (2)`` -> ``apple-tree--2``). ``free_ids`` and the build's ``scan_stem`` both use it."""
+    return re.sub(r"[^\w-]", "-", text).strip("-_")[:110] or "ex"
+
+
 def free_ids(taken_ids: list[str], examples: Path, prefix: str, count: int) -> list[str]:
-    """``count`` ids ``PREFIX-NNNN`` after the highest number in ``taken_ids`` with that prefix, skipping
-    any with a folder in ``examples`` (``prefix`` made safe first)."""
-    prefix = re.sub(r"[^\w-]", "-", prefix).strip("-_")[:110] or "ex"
+    """``count`` ids ``PREFIX-NNNN`` after the highest number with that prefix in ``taken_ids`` or among
+    the folders in ``quarantine/`` beside ``examples`` (named ``ID-HEX``, see ``recovery``: a damaged
+    example's id is not given to another example while its folder is there), skipping any with a folder in ``examples``
+    (``prefix`` made safe first, ``safe_prefix``)."""
+    prefix = safe_prefix(prefix)
     pattern = re.compile(re.escape(prefix) + r"-(\d+)$")
-    taken = [int(m.group(1)) for i in taken_ids if (m := pattern.match(i))]
+    qdir = examples.parent / "quarantine"
+    quarantined = [q.name.rsplit("-", 1)[0] for q in qdir.iterdir()] if qdir.is_dir() else []
+    taken = [int(m.group(1)) for i in [*taken_ids, *quarantined] if (m := pattern.match(i))]
     out, n = [], max(taken, default=0) + 1
     while len(out) < count:
         if not (examples / f"{prefix}-{n:04d}").exists():

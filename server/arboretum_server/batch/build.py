@@ -10,10 +10,14 @@ Order of work:
 2. One task per remaining scan (``tasks.decompose_scan``) goes to the cluster: a ``LocalCluster`` of
    ``workers`` single-threaded processes, or the scheduler at ``scheduler`` (``tcp://HOST:8786``).
 3. As each future completes, the client stores that scan's examples (all or none, ``Library.add_new``,
-   under the library's lock), so killing the build loses only the scans still in flight. Writes are not fsynced
-   one by one (one ``os.sync`` at the end): a process kill loses nothing stored, and after a power
-   loss a torn example folder is quarantined when the library is next opened; the next build finds it
-   there and does its scan again.
+   under the library's lock), so killing the build loses only the scans still in flight. A scan done
+   again (``rebuild``, damaged) has its new examples stored first, under fresh ids, and its old ones
+   deleted after them under the same lock hold, so a failure keeps the old ones (``plan.py``). Writes
+   are not fsynced one by one (one ``os.sync`` at the end): a process kill loses nothing stored. After a
+   power loss, a torn folder without a catalog row is quarantined when the library is next opened and
+   one whose files are not the size its row records is seen by the plan: either way the next build does
+   its scan again. One torn at its right size is found only when read; ``arboretum library delete`` it
+   and build its scan again with ``rebuild``.
 
 A scan that cannot be read, is empty or holds no tree is reported (``ScanRecord.error``) and skipped.
 """
@@ -63,13 +67,17 @@ class BuildOptions:
     recursive: bool = False
     """Folders given: take the point-cloud files of every folder below them too."""
     worker_timeout: float | None = None
-    """Give up (``InputError``) when the cluster has had no worker for this many seconds; None waits."""
+    """With ``scheduler`` only: give up (``InputError``) when the scheduler has had no worker for this
+    many seconds; None waits. (A LocalCluster has no worker only while one is restarted.)"""
 
     def __post_init__(self) -> None:
         if self.workers < 1:
             raise InputError(f"--workers must be at least 1, got {self.workers}")
         if self.worker_timeout is not None and not self.worker_timeout > 0:
             raise InputError(f"--worker-timeout must be a number of seconds > 0, got {self.worker_timeout}")
+        if self.worker_timeout is not None and self.scheduler is None:
+            raise InputError("--worker-timeout applies only with --scheduler (a local cluster always has "
+                             "its --workers); leave it out or give --scheduler tcp://HOST:8786")
         if self.scheduler is not None and "://" not in self.scheduler:
             raise InputError(f"--scheduler must be an address like tcp://HOST:8786, got {self.scheduler!r}")
 
@@ -159,7 +167,7 @@ def _run_cluster(lib, todo: list[ScanRecord], o: BuildOptions, result: BuildResu
             by_key[fut.key] = r
             futures.append(fut)
         try:
-            waiting = Waiting(client, name, o, progress, lambda d, t: _status(result, d, t))
+            waiting = Waiting(client, o.scheduler, o, progress, lambda d, t: _status(result, d, t))
             for done, fut in enumerate(completed(futures, waiting), 1):
                 _store(lib, by_key[fut.key], _outcome(fut))
                 fut.release()
@@ -185,11 +193,13 @@ def _store(lib, r: ScanRecord, out: ScanOutcome | str) -> None:
     if out.error:
         r.status, r.error = "failed", out.error
         return
-    for id_ in r.replace:  # its examples of an earlier build (rebuild, damaged), deleted only now
-        if id_ in lib:
-            lib.delete(id_)
-    r.examples.extend(e.id for e in lib.add_new(out.examples, scan_stem(r.path)))  # all or none
-    r.status = "added"
+    with lib.locked():  # no other writer between storing the new examples and deleting the old
+        # all or none, under fresh ids (the old ones still exist): a failure here leaves the old intact
+        r.examples.extend(e.id for e in lib.add_new(out.examples, scan_stem(r.path)))
+        r.status = "added"
+        for id_ in r.replace:  # its examples of an earlier build (rebuild, damaged), deleted only now
+            if id_ in lib:
+                lib.delete(id_)
 
 
 def _status(result: BuildResult, done: int, total: int) -> str:

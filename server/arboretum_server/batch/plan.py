@@ -5,23 +5,38 @@ is stored: the stored species and notes, plus a note when
 
 - some of its examples are gone (``scan_examples`` in the provenance says how many it gave). A scan's
   examples are stored all or none (``Library.add_new``, one group journal that a crash rolls back), so a
-  shortfall means examples were removed afterwards, usually with ``arboretum library delete``: the build
-  keeps that pruning. Only when the library's ``quarantine/`` holds a damaged example of the scan (a torn
-  folder found after a power loss) is the scan done again (``redone``);
+  shortfall usually means examples were deleted afterwards with ``arboretum library delete``: the build
+  keeps that pruning. A folder lost whole in a power loss (its rename never reached the disk) looks the
+  same: ``--rebuild`` restores it. Only when the library's ``quarantine/`` holds a damaged example of
+  the scan (a folder without a catalog row found broken when the library was opened) is the scan done
+  again (``redone``);
 - the stored examples were made with other options than this run's (species, points, height, seed);
 - the library also holds examples of another file of the same name with other contents (an earlier
   version of an edited scan, or a namesake from another folder: the library keeps only file names, so
   they are reported, never deleted).
 
-With ``rebuild`` every scan already in the library is decomposed again with this run's options; its old
-examples are deleted just before the new ones are stored (``build._store``), so a scan that fails keeps
-them.
+A scan is also done again when one of its examples has files of another size than its catalog row
+records (``_torn``: an unsynced build's folder torn by a power loss while its row survived, typically an
+emptied arrays.npz); two ``stat`` calls an example. Files torn at their right size are not noticed
+until read (``Library.get`` names the example): ``arboretum library delete`` it, then build the scan
+again with ``--rebuild`` (without it, the scan short of an example is kept as pruned).
+
+With ``rebuild`` (or a damaged scan) the scan is decomposed again with this run's options and, in
+one hold of the library's write lock (``build._store``), its new examples are stored first, all or none
+under fresh ids (the old ones still exist, so ``Library.add_new`` numbers the new ones after them: a
+saved session naming an old id never silently shows a new example), and only then are its old examples deleted. A
+scan whose decomposition fails, or whose new examples cannot be stored (disk full, another writer
+holding the lock, Ctrl-C), keeps its old examples untouched. Stopped while the old ones are being
+deleted (Ctrl-C, a crash), the library holds the new examples and some old ones: the next build
+notes more examples than ``scan_examples``; ``--rebuild`` replaces them all.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 from typing import Any
+
+from arboretum_library.folders import ARRAYS, META, safe_prefix
 
 from .tasks import NOTES_KEY, SCAN_EXAMPLES_KEY
 
@@ -30,8 +45,9 @@ COMPARED = ("points", "height", "seed")
 
 
 def scan_stem(path: str) -> str:
-    """The id prefix of a scan's examples: its file stem made safe (``apple_1.xyz`` -> ``apple_1``)."""
-    return "".join(c if c.isalnum() or c in "-_" else "-" for c in Path(path).stem) or "scan"
+    """The id prefix of a scan's examples: its file stem made safe exactly as ``Library.add_new`` makes
+    it (``folders.safe_prefix``: ``apple tree (2).xyz`` -> ``apple-tree--2``)."""
+    return safe_prefix(Path(path).stem)
 
 
 def plan(lib, records: list, options: Any = None) -> list:
@@ -42,6 +58,8 @@ def plan(lib, records: list, options: Any = None) -> list:
 
     seen: set[str] = set()
     todo = []
+    entries = lib.entries()
+    sizes = {e.id: e.size_bytes for e in entries}
     for r in records:
         try:
             r.sha256 = file_sha256(r.path)
@@ -53,13 +71,13 @@ def plan(lib, records: list, options: Any = None) -> list:
             continue
         seen.add(r.sha256)
         ids = lib.find_source(r.sha256)
-        if ids and (getattr(options, "rebuild", False) or _damaged(lib, r, ids)):
+        if ids and (getattr(options, "rebuild", False) or _torn(lib, r, ids, sizes) or _damaged(lib, r, ids)):
             r.replace = list(ids)  # counted in BuildResult.redone once stored (build_library)
         elif ids:
             _skip(lib, r, ids, options)
             continue
         todo.append(r)
-    _namesakes(lib, records, seen)
+    _namesakes(entries, records, seen)
     return todo
 
 
@@ -71,7 +89,11 @@ def _skip(lib, r, ids: list[str], options: Any) -> None:
     want = params.get(SCAN_EXAMPLES_KEY)
     if want is not None and len(ids) < int(want):
         r.notes.append(f"{int(want) - len(ids)} of its {int(want)} examples are no longer in the library "
-                       "(deleted since it was built): kept so; --rebuild makes them all again")
+                       "(deleted since it was built, or lost in a power loss): kept so; --rebuild makes "
+                       "them all again")
+    elif want is not None and len(ids) > int(want):
+        r.notes.append(f"the library holds {len(ids)} examples of it, not the {int(want)} it gives: a "
+                       "--rebuild stopped while deleting the old ones; --rebuild again replaces them all")
     differ = [("species", prov.species, r.species)] if options is not None and prov.species != r.species else []
     differ += [(k, params.get(k), getattr(options, k)) for k in COMPARED
                if options is not None and k in params and params.get(k) != getattr(options, k)]
@@ -118,11 +140,29 @@ def _ctime(path: Path) -> float:
         return 0.0
 
 
-def _namesakes(lib, records: list, given: set[str]) -> None:
+def _torn(lib, r, ids: list[str], sizes: dict[str, int]) -> bool:
+    """Whether an example of the scan has files of another size than its catalog row records (the size
+    of meta.json plus arrays.npz when stored): a folder torn by a power loss after an unsynced build, its
+    row intact (the files' data had not reached the disk: typically left empty). Two ``stat`` calls an
+    example; contents torn at the right size are not seen here (``Library.get`` names them)."""
+    root = Path(lib.root) / "examples"
+    for id_ in ids:
+        try:
+            size = sum((root / id_ / name).stat().st_size for name in (META, ARRAYS))
+        except OSError:
+            size = -1
+        if size != sizes.get(id_, size):
+            r.notes.append(f"its example {id_} is damaged (its files are not the size the library "
+                           "recorded: cut short by a power loss?): the scan is done again")
+            return True
+    return False
+
+
+def _namesakes(entries: list, records: list, given: set[str]) -> None:
     """Note, on every record, examples in the library from a file of the same name whose contents are
     not among the scans given (an earlier version of an edited scan: stale; or a namesake elsewhere)."""
     by_name: dict[str, dict[str, list[str]]] = {}
-    for e in lib.entries():
+    for e in entries:
         by_name.setdefault(e.source, {}).setdefault(e.source_sha256, []).append(e.id)
     for r in records:
         other = {sha: ids for sha, ids in by_name.get(Path(r.path).name, {}).items() if sha not in given}

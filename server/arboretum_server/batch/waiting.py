@@ -3,7 +3,9 @@
 ``--scheduler`` may name a scheduler whose workers are not started yet (or have all died): tasks then
 wait without end. ``completed`` yields futures as they finish and, each second nothing does, asks the
 scheduler how many workers it has; with none, the status line says so (``Waiting``), and after
-``worker_timeout`` seconds without a worker the build gives up with an ``InputError``.
+``worker_timeout`` seconds without a worker the build gives up with an ``InputError``. A LocalCluster
+has no worker only while its nanny restarts a killed one: the status line says that, with no hint to
+start workers (``worker_timeout`` is refused without ``--scheduler``, ``BuildOptions``).
 """
 
 from __future__ import annotations
@@ -22,9 +24,10 @@ TICK_S = 0.05
 
 
 class Waiting:
-    """Tells the user (``progress``) when the cluster ``address`` has no worker; see the module doc."""
+    """Tells the user (``progress``) when the cluster has no worker; see the module doc. ``address``: the
+    ``--scheduler`` address, None for the build's own LocalCluster."""
 
-    def __init__(self, client: Any, address: str, options: Any, progress: ProgressFn,
+    def __init__(self, client: Any, address: str | None, options: Any, progress: ProgressFn,
                  status: Callable[[int, int], str]) -> None:
         self.client, self.address, self.options, self.progress = client, address, options, progress
         self.status = status
@@ -33,6 +36,8 @@ class Waiting:
         self.done, self.total = 0, 1
 
     def message(self) -> str:
+        if self.address is None:
+            return "waiting: the local cluster has 0 workers (a worker process is being restarted)"
         return (f"waiting: the Dask scheduler at {self.address} has 0 workers (start some: "
                 f"dask worker {self.address})")
 
