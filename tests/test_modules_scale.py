@@ -67,7 +67,7 @@ def test_a_sphere_crown_gives_the_same_tree_at_any_size(tmp_path, capsys, radius
         s[r] = _modules(["--crown", str(tmp_path / f"c{r}.obj"), "--out", str(tmp_path / f"t{r}.glb"),
                          "--seed", "1"], capsys)
         top, base = _trunk_top(tmp_path / f"t{r}.glb")
-        assert base == pytest.approx(0.0, abs=1e-6 * r)
+        assert base == pytest.approx(lo - (hi - lo) / 4, abs=1e-6 * r)  # a quarter of the crown below it
         assert top == pytest.approx(lo + (hi - lo) / 3, rel=1e-4)  # a third of the way up the crown
     ref, other = s[3.0], s[radius]
     assert ref["modules_placed"] > 50 and ref["constraints"]["reached_fraction"] > 0.85
@@ -136,3 +136,61 @@ def test_the_fitted_trunk_does_not_reach_a_small_crown_alone():
     d_kill = opt.kill_fraction * float(np.ptp(np.concatenate([world, v]), axis=0).max())
     np.testing.assert_array_equal(tree.reached, d <= d_kill)
     assert tree.stats.reached_fraction < 0.2
+
+
+@pytest.mark.parametrize("xyz", [(0.0, 0.0, 310.0), (512345.0, 4123456.0, 316.0)])
+def test_a_crown_high_above_z0_gets_the_tree_it_gets_near_the_ground(tmp_path, capsys, xyz):
+    """An r = 4 m sphere at z = 6 m (trunk on z = 0) against the same sphere 310 m up or at UTM xy: before,
+    the trunk stood on z = 0, ×88 (313 m), and d_k covered the crown from the trunk alone (1 module, "100 %")."""
+    from arboretum_server.modules.fit import crown_root
+
+    runs = {}
+    for c in ((0.0, 0.0, 6.0), xyz):
+        v, f = sphere_mesh(list(c), 4.0)
+        save_obj(tmp_path / "c.obj", v, f)
+        runs[c] = _modules(["--crown", str(tmp_path / "c.obj"), "--out", str(tmp_path / "t.glb"), "--seed", "1"],
+                           capsys)
+        top, base = _trunk_top(tmp_path / "t.glb")
+        lo, hi = np.round(v[:, 2], 5).min(), np.round(v[:, 2], 5).max()
+        assert base == pytest.approx(max(0.0, lo - (hi - lo) / 4), abs=1e-3)
+        assert base == pytest.approx(crown_root(v)[2], abs=1e-3)
+        assert top == pytest.approx(lo + (hi - lo) / 3, abs=1e-3)
+    near, far = runs[(0.0, 0.0, 6.0)], runs[xyz]
+    assert near["modules_placed"] > 100 and near["constraints"]["reached_fraction"] > 0.85
+    assert 0.9 <= far["modules_placed"] / near["modules_placed"] <= 1.1
+    assert abs(far["constraints"]["reached_fraction"] - near["constraints"]["reached_fraction"]) < 0.05
+    assert far["module_scale"] == pytest.approx(near["module_scale"]) and not far["notes"]
+
+
+def test_a_trunk_far_below_the_crown_is_bounded():
+    """A root 300 m under an 8 m crown: the trunk is at most ``max_trunk_fraction`` crown heights long."""
+    from arboretum_server.modules.crown import crown_from_meshes
+    from arboretum_server.modules.fit import FitOptions, default_module_set, trunk_transform
+
+    modules = default_module_set()
+    crown = crown_from_meshes([sphere_mesh([0, 0, 306], 4.0)], 16)
+    trunk = modules.modules[int(modules.trunk_indices[0])]
+    T = trunk_transform(modules, crown, [0, 0, 0])
+    height = T[2, 2] * trunk.vertices[:, 2].max()
+    assert height == pytest.approx(FitOptions().max_trunk_fraction * np.ptp(crown.bounds[:, 2]), rel=1e-9)
+    T = trunk_transform(modules, crown, [0, 0, 300])  # near: a third of the way up the crown
+    assert T[2, 2] * trunk.vertices[:, 2].max() == pytest.approx(crown.bounds[0, 2] + np.ptp(crown.bounds[:, 2]) / 3
+                                                                   - 300, rel=1e-9)
+
+
+def test_a_trunk_only_tree_always_gets_a_note(tmp_path, capsys, monkeypatch):
+    """Only the trunk placed: a note even when its branching points "reach" every attraction point."""
+    import functools
+
+    import arboretum_server.modules.options as options
+    from arboretum_server.modules.fit import reach_note
+
+    assert reach_note(1.0) is None and reach_note(0.4).startswith("only 40%")
+    assert reach_note(1.0, 1).startswith("only the trunk was placed") and "100%" in reach_note(1.0, 1)
+    assert reach_note(1.0, 2) is None
+    v, f = sphere_mesh([0, 0, 6], 4.0)
+    save_obj(tmp_path / "c.obj", v, f)
+    monkeypatch.setattr(options, "ModularTreeOptions",
+                        functools.partial(options.ModularTreeOptions, max_iterations=0))
+    s = _modules(["--crown", str(tmp_path / "c.obj"), "--out", str(tmp_path / "t.glb")], capsys)
+    assert s["modules_placed"] == 1 and len(s["notes"]) == 1 and s["notes"][0].startswith("only the trunk")

@@ -134,20 +134,19 @@ def _grown(args: argparse.Namespace):
     import numpy as np
 
     from .export import from_modular_tree
-    from .fit import grow_in_crown, reach_note
+    from .fit import crown_root, grow_in_crown, reach_note
     from .options import ModularTreeOptions
     from .report import constraint_report
 
     modules = _module_set(args.modules, args.types)
     if args.crown:
         meshes = [_crown_mesh(args.crown)]
-        lo = meshes[0][0].min(axis=0)
-        root = np.r_[(lo + meshes[0][0].max(axis=0))[:2] / 2, min(lo[2], 0.0)]
+        root = crown_root(meshes[0][0])
     else:
         meshes, root = _assembly_crown(args.assembly, args.library)
     tree, scaled, k = grow_in_crown(modules, meshes, root, ModularTreeOptions(),
                                     np.random.default_rng(args.seed))
-    note = reach_note(tree.stats.reached_fraction)
+    note = reach_note(tree.stats.reached_fraction, tree.stats.modules_placed)
     return from_modular_tree(tree, scaled), {
         "source": "crown" if args.crown else "assembly", "module_scale": k,
         "constraints": constraint_report(tree), "notes": [note] if note else []}

@@ -65,7 +65,7 @@ def export_modules_job(progress, hbl: HBL, seed: int, options: dict, format: str
     progress(3, 3, "done")
     stats = {"instances": int(len(tree.module)), "types": int(tree.stats.types_used),
              "reached_fraction": float(tree.stats.reached_fraction), "module_scale": k,
-             "notes": [n for n in [reach_note(tree.stats.reached_fraction)] if n]}
+             "notes": [n for n in [reach_note(tree.stats.reached_fraction, tree.stats.modules_placed)] if n]}
     return {"name": name, "data": np.frombuffer(data, np.uint8), "stats": stats}
 
 
