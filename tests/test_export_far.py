@@ -99,6 +99,33 @@ def test_instanced_glb_translations_relative_to_a_root(tmp_path):
     np.testing.assert_allclose(t + np.array(root.translation), zup_to_yup(T[:, :3, 3]), rtol=0, atol=MM)
 
 
+def test_plain_nodes_glb_translations_relative_to_a_root():
+    """``--plain-nodes``: each node matrix holds its translation minus the root's, so float32 engines place
+    every instance within 1 mm (before: the full 5.4e6 m in every matrix, instances moved by up to 0.2 m)."""
+    from arboretum_library.export.gltf_read import parse_glb
+    from arboretum_library.export.instanced import plain_nodes_glb_bytes
+
+    cube = MeshPart("m", np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]]) * 0.01,
+                    np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]))
+    rng = np.random.default_rng(0)
+    T = np.tile(np.eye(4), (30, 1, 1))
+    a = rng.uniform(0, 2 * np.pi, 30)
+    T[:, 0, 0], T[:, 0, 1], T[:, 1, 0], T[:, 1, 1] = np.cos(a), -np.sin(a), np.sin(a), np.cos(a)
+    T[:, :3, :3] *= rng.uniform(0.5, 2.0, 30)[:, None, None]
+    T[:, :3, 3] = UTM + rng.uniform(-20, 20, (30, 3))
+    data = plain_nodes_glb_bytes([cube], [Material("m")], np.zeros(30, np.int64), T)
+    (placed,) = parse_glb(data)
+    np.testing.assert_allclose(placed.instances, T, rtol=0, atol=MM)
+    doc = _json(data)
+    root = doc["nodes"][doc["scenes"][0]["nodes"][0]]
+    assert doc["scenes"][0]["nodes"] == [30] and root["name"] == "origin" and root["children"] == list(range(30))
+    np.testing.assert_array_equal(root["translation"], zup_to_yup(np.round((T[:, :3, 3].min(0) + T[:, :3, 3].max(0)) / 2)))
+    M = np.array([n["matrix"] for n in doc["nodes"][:30]], np.float32).reshape(-1, 4, 4)  # column-major
+    t = M[:, 3, :3].astype(np.float64)  # as a float32 engine reads it
+    assert np.abs(t).max() < 40.0
+    np.testing.assert_allclose(t + root["translation"], zup_to_yup(T[:, :3, 3]), rtol=0, atol=MM)
+
+
 def test_usd_mesh_and_instancer_at_utm(far_parts, tmp_path):
     pytest.importorskip("pxr")
     from pxr import Usd, UsdGeom

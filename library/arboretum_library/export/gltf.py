@@ -3,17 +3,20 @@
 The world is Z up; glTF is Y up, so positions and normals go through ``geometry.zup_to_yup`` and node
 matrices through the same change of basis. Nodes that share a mesh are written as plain nodes (every
 importer reads them); no extension is needed. Meshes given in the world frame of a scene far from the
-origin (``parts.local_origin``) are written relative to it under a root node "origin" whose translation
-(JSON, float64) puts them back. numpy and the standard library only.
+origin (``parts.local_origin``), or nodes placed far from it, are written relative to it under a root node
+"origin" whose translation (JSON, float64) puts them back. numpy and the standard library only.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import signal
 import struct
 import tempfile
-from collections.abc import Sequence
+import threading
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -119,29 +122,38 @@ def glb_bytes(meshes: Sequence[MeshPart], materials: Sequence[Material],
               nodes: Sequence[Node] | None = None) -> bytes:
     """The bytes of a GLB holding ``meshes`` (empty ones are skipped) placed by ``nodes``.
 
-    ``nodes`` defaults to one untransformed node per mesh (meshes in the world frame: a far scene is
-    written relative to ``local_origin``, see the module docs). Node ``mesh`` indices refer to ``meshes``.
+    ``nodes`` defaults to one untransformed node per mesh (meshes in the world frame). A far scene is
+    written relative to ``local_origin`` (see the module docs): of the mesh positions without ``nodes``,
+    of the node translations with them (each node's matrix then carries its translation minus it).
+    Node ``mesh`` indices refer to ``meshes``.
     """
     b = _Builder()
     _materials(b, materials)
     if not b.doc["materials"]:
         del b.doc["materials"]
-    origin = np.zeros(3)
     if nodes is None:
         used = [m.positions for m in meshes if len(m.faces)]
         origin = local_origin(np.concatenate(used) if used else np.zeros((0, 3)))
+        nodes, mesh_origin = [Node(i, name=m.name) for i, m in enumerate(meshes)], origin
+    else:
+        placed = [n.T_world_node[:3, 3] for n in nodes
+                  if 0 <= n.mesh < len(meshes) and len(meshes[n.mesh].faces)]
+        origin, mesh_origin = local_origin(np.array(placed, np.float64).reshape(-1, 3)), None
     written: dict[int, int] = {}
     for i, part in enumerate(meshes):
         if len(part.faces) == 0:
             continue
-        b.doc["meshes"].append({"name": part.name, "primitives": [_primitive(b, part, origin)]})
+        b.doc["meshes"].append({"name": part.name, "primitives": [_primitive(b, part, mesh_origin)]})
         written[i] = len(b.doc["meshes"]) - 1
-    for node in nodes if nodes is not None else [Node(i, name=m.name) for i, m in enumerate(meshes)]:
+    for node in nodes:
         if node.mesh not in written:
             continue
         entry: dict[str, Any] = {"mesh": written[node.mesh], "name": node.name or meshes[node.mesh].name}
-        if not np.allclose(node.T_world_node, np.eye(4)):
-            entry["matrix"] = node_matrix_yup(node.T_world_node)
+        T = np.array(node.T_world_node, np.float64)
+        if mesh_origin is None:
+            T[:3, 3] -= origin
+        if not np.allclose(T, np.eye(4)):
+            entry["matrix"] = node_matrix_yup(T)
         b.doc["nodes"].append(entry)
         b.doc["scenes"][0]["nodes"].append(len(b.doc["nodes"]) - 1)
     root_at(b, origin)
@@ -179,20 +191,67 @@ def pack_glb(b: _Builder) -> bytes:
     return bytes(out)
 
 
+def _process_umask() -> int:
+    """The process's umask: from /proc on Linux (read, not changed), else set and restored once."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+FILE_MODE = 0o666 & ~_process_umask()
+"""Mode of the files written here, read once at import (toggling the umask per write would race with
+other threads creating files)."""
+
+
+@contextmanager
+def _sigint_deferred() -> Iterator[None]:
+    """Hold Ctrl-C (SIGINT) back until the block ends, then raise ``KeyboardInterrupt``; only on the main
+    thread with Python's default handler installed (otherwise the block runs unchanged)."""
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):  # fmt: skip
+        yield
+        return
+    caught: list[int] = []
+    signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if caught:
+        raise KeyboardInterrupt
+
+
+def write_files_atomic(files: Sequence[tuple[Path, bytes]]) -> None:
+    """Write every (path, data) to a temporary file beside it, then rename them in order with Ctrl-C held
+    back until the last rename (the set is replaced whole); on an error or interrupt before the renames,
+    every temporary file is removed and no ``path`` changes."""
+    temps: list[str] = []
+    try:
+        for path, data in files:
+            fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+            temps.append(tmp)
+            with os.fdopen(fd, "wb") as f:
+                f.write(data)
+            os.chmod(tmp, FILE_MODE)
+        with _sigint_deferred():
+            for (path, _), tmp in zip(files, temps):
+                os.replace(tmp, path)
+    except BaseException:
+        for tmp in temps:
+            Path(tmp).unlink(missing_ok=True)
+        raise
+
+
 def write_atomic(path: str | os.PathLike, data: bytes) -> None:
     """Write ``data`` to ``path`` through a temporary file and ``os.replace`` (no half-written files)."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_files_atomic([(Path(path), data)])
 
 
 def write_glb(path: str | os.PathLike, meshes: Sequence[MeshPart], materials: Sequence[Material],
