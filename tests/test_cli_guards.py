@@ -192,3 +192,19 @@ def test_thin_chains_takes_any_stride():
     chains = split_chains(parents, np.linspace(1.0, 0.1, 10))
     huge = thin_chains(chains, 1 << 70)
     assert huge.nodes.tolist() == [0, 9] and thin_chains(chains, 9).nodes.tolist() == [0, 9]
+
+
+@pytest.mark.parametrize("argv", [["grow", "h.npz", "--out", "tree.obj"],
+                                  ["synth", "--out", "s.ply", "--mesh", "tree.obj"]])
+@pytest.mark.parametrize("foreign", ["tree.mtl", "tree_leaf.png"])
+def test_a_foreign_obj_sidecar_is_refused_before_growth(tmp_path, hbl_file, capsys, no_work, monkeypatch,
+                                                        argv, foreign):
+    """The OBJ writer refuses a .mtl or texture it did not write; the CLIs ask it before growing (before:
+    the refusal came after the whole growth)."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "h.npz").write_bytes(hbl_file.read_bytes())
+    (tmp_path / foreign).write_bytes(b"someone else's file\n")
+    err = _error(argv, capsys)
+    assert re.search(rf"{foreign}: exists and was not written by Arboretum", err), err
+    assert (tmp_path / foreign).read_bytes() == b"someone else's file\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["h.npz", foreign])

@@ -91,3 +91,21 @@ def test_modules_help_names_the_axes(capsys):
         main(["modules", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert ".obj (Y up unless its header says Z up)" in text and ".glb/.gltf (Y up)" in text
+
+
+@pytest.mark.parametrize("text, axis", [
+    ("# Exported by FooScan; axes converted from Z-up to Y-up\nv 0 5 0\nv 1 5 0\nv 0 5 1\nf 1 2 3\n", "y"),
+    ("# my crown, Z up\nv 0 5 0\nv 1 5 0\nv 0 5 1\nf 1 2 3\n", "y"),
+    ("# Blender\n# z-up\nv 0 5 0\nv 1 5 0\nv 0 5 1\nf 1 2 3\n", "y"),
+    ("# arboretum OBJ (Z up, metres)\nv 0 5 0\nv 1 5 0\nv 0 5 1\nf 1 2 3\n", "z"),
+    ("# arboretum OBJ (Y up, metres)\n# Z up data, converted\nv 0 5 0\nv 1 5 0\nv 0 5 1\nf 1 2 3\n", "y"),
+    ("# Arboretum module branch_00\nv 0 5 0\nv 1 5 0\nv 0 5 1\nf 1 2 3\n", "z"),
+])
+def test_only_arboretums_own_header_says_z_up(tmp_path, text, axis):
+    """A foreign file's comment is no axis claim (before: "converted from Z-up to Y-up" in a Y-up file
+    read as Z up, and the crown lay on its side)."""
+    path = tmp_path / "c.obj"
+    path.write_text(text)
+    assert obj_up_axis(path) == axis
+    v, _ = read_obj(path)
+    np.testing.assert_allclose(v[:, 2 if axis == "y" else 1], 5.0)  # Y up: y = 5 becomes the height

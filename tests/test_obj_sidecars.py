@@ -104,6 +104,8 @@ def test_interrupt_while_formatting_leaves_nothing(tmp_path, monkeypatch):
 
 
 def test_interrupt_keeps_the_previous_export(tmp_path, monkeypatch):
+    """The re-export has other textures, so a mix of old and new files would show (before: the new
+    tree_leaf.png was renamed beside the old .mtl and .obj)."""
     write_obj(tmp_path / "tree.obj", *_scene())
     before = {n: (tmp_path / n).read_bytes() for n in _names(tmp_path)}
     real = obj.os.replace
@@ -115,6 +117,79 @@ def test_interrupt_keeps_the_previous_export(tmp_path, monkeypatch):
 
     monkeypatch.setattr(obj.os, "replace", replace)
     parts, mats = _scene()
+    mats = [Material("bark", texture_png=LEAF, texture_name="bark.png"),
+            Material("leaf", texture_png=BARK, texture_name="leaf.png", alpha_cutoff=0.5)]
     with pytest.raises(KeyboardInterrupt):
         write_obj(tmp_path / "tree.obj", parts[:1], mats)
     assert {n: (tmp_path / n).read_bytes() for n in _names(tmp_path)} == before
+
+
+def test_ctrl_c_during_the_renames_is_held_back_until_the_set_is_whole(tmp_path, monkeypatch):
+    """A real SIGINT at the first rename: every file is the new one, then KeyboardInterrupt."""
+    import signal
+
+    write_obj(tmp_path / "tree.obj", *_scene())
+    real, calls = obj.os.replace, []
+
+    def replace(src, dst):
+        if not calls:
+            signal.raise_signal(signal.SIGINT)
+        calls.append(str(dst))
+        return real(src, dst)
+
+    monkeypatch.setattr(obj.os, "replace", replace)
+    parts, _ = _scene()
+    mats = [Material("bark", texture_png=LEAF, texture_name="bark.png"),
+            Material("leaf", texture_png=BARK, texture_name="leaf.png", alpha_cutoff=0.5)]
+    with pytest.raises(KeyboardInterrupt):
+        write_obj(tmp_path / "tree.obj", parts[:1], mats)
+    assert [p.rsplit("/", 1)[1] for p in calls] == ["tree.mtl", "tree_bark.png", "tree_leaf.png", "tree.obj"]
+    assert (tmp_path / "tree_bark.png").read_bytes() == LEAF and (tmp_path / "tree_leaf.png").read_bytes() == BARK
+    assert (tmp_path / "tree.mtl").read_text() == obj.mtl_text(mats, "tree")
+    assert (tmp_path / "tree.obj").read_text() == obj.obj_text(parts[:1], mats, "tree.mtl")
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert _names(tmp_path) == ["tree.mtl", "tree.obj", "tree_bark.png", "tree_leaf.png"]
+
+
+def test_a_broken_first_export_does_not_block_the_next(tmp_path, monkeypatch):
+    """The .mtl, which records what Arboretum owns, is renamed first: a first export broken after it
+    leaves textures a re-export with other bytes may replace (before: a lone tree_bark.png, no .mtl, and
+    the re-export was refused as "not written by Arboretum")."""
+    real, calls = obj.os.replace, []
+
+    def replace(src, dst):
+        calls.append(dst)
+        if len(calls) == 2:
+            raise OSError("disk full")
+        return real(src, dst)
+
+    monkeypatch.setattr(obj.os, "replace", replace)
+    parts, mats = _scene()
+    with pytest.raises(OSError):
+        write_obj(tmp_path / "tree.obj", parts, mats)
+    monkeypatch.setattr(obj.os, "replace", real)
+    assert not any(n.endswith(".tmp") for n in _names(tmp_path))
+    mats = [Material("bark", texture_png=LEAF, texture_name="bark.png"),
+            Material("leaf", texture_png=BARK, texture_name="leaf.png", alpha_cutoff=0.5)]
+    write_obj(tmp_path / "tree.obj", parts, mats)
+    assert (tmp_path / "tree_bark.png").read_bytes() == LEAF and (tmp_path / "tree_leaf.png").read_bytes() == BARK
+
+
+def test_writes_never_touch_the_process_umask(tmp_path, monkeypatch):
+    """The file mode comes from the umask read once at import (toggling it per write races with other
+    threads creating files in a threaded server)."""
+    import os
+
+    from arboretum_library.export.gltf import write_glb
+
+    mask = os.umask(0o022)
+    os.umask(mask)
+
+    def umask(value):
+        raise AssertionError("os.umask called while writing")
+
+    monkeypatch.setattr(obj.os, "umask", umask)
+    write_obj(tmp_path / "tree.obj", *_scene())
+    write_glb(tmp_path / "tree.glb", *_scene())
+    for name in ("tree.obj", "tree.mtl", "tree_leaf.png", "tree.glb"):
+        assert (tmp_path / name).stat().st_mode & 0o777 == 0o666 & ~mask

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from arboretum_library.export.parts import local_origin
 from arboretum_library.model import HBL, LEAF, Example, Level
 
 from .scene import InstancedMesh, Mesh, PointSet, Polyline, Scene, grid_for_bounds
@@ -39,19 +40,10 @@ WOOD_COLOR = (0.45, 0.30, 0.16)
 LEAF_COLOR = (0.25, 0.62, 0.20)
 POINT_COLOR = (0.20, 0.30, 0.45)
 
-FAR = 128.0
-"""``far_origin`` moves the scene when its centre lies farther than this (m, in any coordinate) from the
-world origin (float32 resolves 8 µm at 128 m)."""
-
-
-def far_origin(points: np.ndarray) -> np.ndarray:
-    """(3,) float64: the centre of the bounding box of ``points`` (N, 3) rounded to whole metres when it is
-    farther than ``FAR`` from the world origin, else zeros (near data are drawn where they are)."""
-    p = np.asarray(points, np.float64).reshape(-1, 3)
-    if not len(p):
-        return np.zeros(3)
-    centre = (p.min(axis=0) + p.max(axis=0)) / 2
-    return np.round(centre) + 0.0 if np.abs(centre).max() > FAR else np.zeros(3)
+far_origin = local_origin
+"""(3,) float64 from ``points`` (N, 3): the centre of their bounding box rounded to whole metres when it is
+farther than ``parts.FAR`` from the world origin, else zeros; the exporters' ``parts.local_origin``, so a scene
+draws about the origin its GLB is written about."""
 
 
 @dataclass(frozen=True)

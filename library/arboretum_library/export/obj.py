@@ -8,14 +8,15 @@ origin is the image's bottom-left, so v is flipped from the glTF convention of `
 The sidecars are named after the OBJ's stem (``tree.obj`` -> ``tree.mtl``, ``tree_bark.png``,
 ``tree_leaf.png``) so two exports in one folder do not overwrite each other. Existing files that
 Arboretum did not write are refused, and all files go to temporary names first and are renamed only
-once every one is written (the .obj last), so an interrupt leaves no partial set.
+once every one is written, with Ctrl-C held back until the last rename (``gltf.write_files_atomic``), so
+an interrupt leaves the previous set or the new one, never a mix. The .mtl, which records the textures
+Arboretum owns, is renamed first and the .obj last.
 """
 
 from __future__ import annotations
 
 import os
 import re
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -24,10 +25,11 @@ import numpy as np
 from arboretum_library.errors import InputError
 from arboretum_library.geometry import zup_to_yup
 
+from .gltf import write_files_atomic
 from .parts import Material, MeshPart
 
 MTL_HEADER = "# arboretum MTL\n"
-_UP = re.compile(r"\b([yz])[ -]up\b", re.IGNORECASE)
+_HEADER = re.compile(r"# arboretum OBJ \(([YZ]) up\b")
 
 
 def _rows(fmt: str, arr: np.ndarray) -> str:
@@ -90,19 +92,15 @@ def mtl_text(materials: Sequence[Material], stem: str = "") -> str:
 def obj_up_axis(path: str | os.PathLike) -> str:
     """'y' or 'z': the up axis of the OBJ at ``path``.
 
-    Its leading comment lines decide ('Y up' / 'Z up', as this writer and ``save_obj`` put them);
-    module files from ``save_obj`` before it wrote that line start with '# Arboretum module' and are
-    Z up; anything else is Y up, as Blender, Maya and most OBJ exporters write it."""
+    Only Arboretum's own first line decides: ``# arboretum OBJ (Y up`` / ``(Z up`` (this writer and
+    ``save_obj``), and ``# Arboretum module`` (module files from ``save_obj`` before it wrote that line,
+    Z up). Anything else is Y up, as Blender, Maya and most OBJ exporters write it, whatever its comments
+    say ("axes converted from Z-up to Y-up" is no header of ours)."""
     with open(path, encoding="utf-8", errors="replace") as f:
-        for i, line in enumerate(f):
-            text = line.strip()
-            if text and not text.startswith("#") or i >= 64:
-                break
-            if (found := _UP.search(text)) is not None:
-                return found.group(1).lower()
-            if i == 0 and text.startswith("# Arboretum module"):
-                return "z"
-    return "y"
+        first = f.readline().strip()
+    if (found := _HEADER.match(first)) is not None:
+        return found.group(1).lower()
+    return "z" if first.startswith("# Arboretum module") else "y"
 
 
 def _ours(path: Path, data: bytes, owned: set[str]) -> bool:
@@ -144,27 +142,6 @@ def check_sidecars(path: str | os.PathLike, materials: Sequence[Material]) -> li
     return files
 
 
-def write_all(files: Sequence[tuple[Path, bytes]]) -> None:
-    """Write every (path, data) to a temporary file beside it, then rename them in order (the last
-    one last); on any error or interrupt before the renames, every temporary file is removed."""
-    temps: list[str] = []
-    umask = os.umask(0)
-    os.umask(umask)
-    try:
-        for path, data in files:
-            fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-            temps.append(tmp)
-            with os.fdopen(fd, "wb") as f:
-                f.write(data)
-            os.chmod(tmp, 0o666 & ~umask)
-        for (path, _), tmp in zip(files, temps):
-            os.replace(tmp, path)
-    except BaseException:
-        for tmp in temps:
-            Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def write_obj(path: str | os.PathLike, meshes: Sequence[MeshPart], materials: Sequence[Material],
               y_up: bool = True) -> list[Path]:
     """Write PATH.obj, PATH.mtl and each textured material's PNG as PATH-stem_NAME.png beside them;
@@ -172,8 +149,8 @@ def write_obj(path: str | os.PathLike, meshes: Sequence[MeshPart], materials: Se
     the sidecars exists and was not written by Arboretum."""
     path = Path(path)
     mtl = path.with_suffix(".mtl")
-    files = check_sidecars(path, materials)
-    files.append((mtl, mtl_text(materials, path.stem).encode()))
-    files.append((path, obj_text(meshes, materials, mtl.name, y_up).encode()))
-    write_all(files)
-    return [path, mtl, *(p for p, _ in files[:-2])]
+    textures = check_sidecars(path, materials)
+    files = [(mtl, mtl_text(materials, path.stem).encode()), *textures,
+             (path, obj_text(meshes, materials, mtl.name, y_up).encode())]
+    write_files_atomic(files)
+    return [path, mtl, *(p for p, _ in textures)]

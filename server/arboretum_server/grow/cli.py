@@ -50,6 +50,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def check_obj_sidecars(out: Path) -> None:
+    """An .obj ``out``: its .mtl and textures refused now, not after growth, when Arboretum did not write
+    them (``export.obj.check_sidecars`` with the materials ``writers.write_mesh`` uses)."""
+    if out.suffix.lower() == ".obj":
+        from arboretum_library.export.obj import check_sidecars
+        from arboretum_server.mesh.scene import tree_materials
+
+        check_sidecars(out, tree_materials())
+
+
 def _check_args(args: argparse.Namespace) -> tuple[Path, Path | None]:
     """Every argument checked before any work: the output paths, then the numbers."""
     from arboretum_server.mesh.lod import check_lod
@@ -62,6 +72,7 @@ def _check_args(args: argparse.Namespace) -> tuple[Path, Path | None]:
     if skel is not None and skel.suffix.lower() not in SKELETON_FORMATS:
         raise InputError(f"--skeleton {skel}: unknown format {skel.suffix!r}; use .json or .ply")
     check_output(out, "--out", inputs=[args.hbl], suffixes=MESH_FORMATS)
+    check_obj_sidecars(out)
     if skel is not None:
         check_output(skel, "--skeleton", inputs=[args.hbl], outputs=[out], suffixes=SKELETON_FORMATS)
     check_seed(args.seed)

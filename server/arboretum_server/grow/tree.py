@@ -22,8 +22,11 @@ def grow_tree(hbl: HBL, opts: GrowOptions, rng: np.random.Generator,
     """Colonize every lobe of ``hbl`` from its bud, then give the whole tree radii and leaves.
 
     Same ``rng`` state, same tree. Radii follow ``opts.branch_radii`` (see ``_radii``). The tree grows in
-    a frame whose origin is the HBL root rounded to whole metres (``growth_origin``), so a tree placed
-    at UTM or geocentric coordinates grows as it does at the origin, only translated.
+    a frame whose origin is the HBL root rounded to whole metres (``growth_origin``), so a tree moved by
+    whole metres (to UTM or geocentric coordinates, say) has the same coordinates in that frame and grows
+    as before, only translated (up to the float64 rounding of its input at the new magnitude, ~1e-9 m at
+    UTM). Moved by a fraction of a metre, it stands elsewhere in that frame, and its twigs and leaves may
+    differ: the cell grid, the hull sampling and float rounding depend on where it stands.
     """
     origin = growth_origin(hbl)
     if origin.any():

@@ -101,6 +101,9 @@ def _check(args: argparse.Namespace) -> None:
         check_output(args.truth, "--truth", outputs=[args.out], suffixes=(".npz",))
     if args.mesh is not None:
         check_output(args.mesh, "--mesh", outputs=[args.out, args.truth], suffixes=MESH_FORMATS)
+        from arboretum_server.grow.cli import check_obj_sidecars
+
+        check_obj_sidecars(args.mesh)
 
 
 def _check_model_options(args: argparse.Namespace) -> None:
