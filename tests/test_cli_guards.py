@@ -40,7 +40,6 @@ def no_work(monkeypatch):
     monkeypatch.setattr(synth_cli, "grow", fail)
     monkeypatch.setattr(modules_cli, "_grown", fail)
     monkeypatch.setattr(modules_cli, "_converted", fail)
-    monkeypatch.setattr(render_cli, "load_scene", fail)
     monkeypatch.setattr(render_cli, "read_input", fail)
 
 

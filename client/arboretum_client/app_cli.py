@@ -192,12 +192,12 @@ def _run_interactive(args, size, factory, scan) -> dict:
             print(f"VR: {exc}", file=sys.stderr)
     win = open_window(size, "Arboretum")
     try:
-        return _window_loop(args, win, size, factory, scan)
+        return _window_loop(args, win, factory, scan)
     finally:
         win.close()
 
 
-def _window_loop(args, win, size, factory, scan) -> dict:
+def _window_loop(args, win, factory, scan) -> dict:
     import glfw
 
     from .app import App

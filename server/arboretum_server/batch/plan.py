@@ -113,9 +113,11 @@ def _damaged(lib, r, ids: list[str]) -> bool:
     examples were stored (an older one was handled by an earlier build, which stored them again)."""
     from arboretum_library.folders import read_provenance
 
-    want = lib.provenance(ids[0]).parameters.get(SCAN_EXAMPLES_KEY)
     qdir = Path(lib.root) / "quarantine"
-    if want is None or len(ids) >= int(want) or not qdir.is_dir():
+    if not qdir.is_dir():  # the common case: no meta.json read at all (_skip reads it once)
+        return False
+    want = lib.provenance(ids[0]).parameters.get(SCAN_EXAMPLES_KEY)
+    if want is None or len(ids) >= int(want):
         return False
     stem = scan_stem(r.path)
     stored = max((_ctime(Path(lib.root) / "examples" / i) for i in ids), default=0.0)
