@@ -120,3 +120,62 @@ def test_cli_ctrl_o_before_any_save_keeps_running_and_takes_the_screenshot(tmp_p
     summary = json.loads(done.stdout)
     assert summary["placements"] == 1 and summary["status"].startswith("load failed:")
     assert summary["screenshots"] == ["after.png"] and (tmp_path / "after.png").stat().st_size > 1000
+
+
+@pytest.fixture
+def actions():
+    from arboretum_client.tools.actions import Actions
+    from arboretum_client.tools.state import ClientState
+
+    worker = Worker(FakeSession)
+    yield Actions(ClientState(), worker)
+    worker.close()
+
+
+def _record_threads(monkeypatch, name: str) -> list[str]:
+    """Wrap ``tools.actions.<name>`` so each call records the thread it ran on."""
+    import threading
+
+    from arboretum_client.tools import actions as module
+
+    threads: list[str] = []
+    real = getattr(module, name)
+
+    def wrapped(*args, **kwargs):
+        threads.append(threading.current_thread().name)
+        return real(*args, **kwargs)
+    monkeypatch.setattr(module, name, wrapped)
+    return threads
+
+
+def test_save_writes_its_file_on_the_worker_thread_not_in_the_frame_loop(actions, tmp_path, monkeypatch):
+    threads = _record_threads(monkeypatch, "save_record")
+    path = tmp_path / "sub" / "session.npz"
+    actions.save(path)
+    assert actions.worker.wait_idle(10)
+    assert threads == ["arboretum-net"] and actions.state.status == "saved session.npz"
+    assert load_record(path, Assembly).placements == ()
+    assert sorted(p.name for p in path.parent.iterdir()) == ["session.npz"]  # no temp file left
+
+
+def test_export_writes_its_file_on_the_worker_thread_and_reports_the_size(actions, tmp_path, monkeypatch):
+    threads = _record_threads(monkeypatch, "write_atomic")
+    actions.export(tmp_path / "out")
+    assert actions.worker.wait_idle(10)
+    written = tmp_path / "out" / "tree.obj"
+    assert threads == ["arboretum-net"] and actions.state.exported == [str(written)]
+    assert actions.state.status == f"exported tree.obj ({written.stat().st_size} bytes)"
+    assert sorted(p.name for p in written.parent.iterdir()) == ["tree.obj"]
+
+
+def test_save_and_export_into_an_unwritable_folder_are_status_lines_and_write_nothing(actions, tmp_path):
+    blocker = tmp_path / "blocker"
+    blocker.write_text("a file where a folder should be")
+    actions.save(blocker / "out" / "session.npz")
+    assert actions.worker.wait_idle(10)
+    assert actions.state.status == f"save failed: cannot write {blocker / 'out' / 'session.npz'} (Not a directory)"
+    actions.export(blocker / "out")
+    assert actions.worker.wait_idle(10)
+    assert actions.state.status == f"export failed: cannot write {blocker / 'out' / 'tree.obj'} (Not a directory)"
+    assert actions.state.exported == [] and [e.split(":")[0] for e in actions.state.errors] == ["save", "export"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["blocker"]

@@ -2,9 +2,10 @@
 
 The frame loop ``submit``s a call (a name, a function of the port, a callback); the worker runs calls
 in order and posts ``Done`` (result or error) and ``Progress`` records to a queue that the frame loop
-``drain``s once per frame, running callbacks on the main thread. A ``USER_ERRORS`` failure raised by
-an ``on_done`` callback (e.g. writing the reply to an unwritable folder) goes to the job's ``on_error``. The port (and its sockets) is only
-ever touched by the worker thread.
+``drain``s once per frame, running callbacks on the main thread, so slow work (file reads and writes)
+belongs in the call, never in ``on_done``. A ``USER_ERRORS`` failure raised by an ``on_done`` callback
+still goes to the job's ``on_error`` (a guard). The port (and its sockets) is only ever touched by the
+worker thread.
 """
 
 from __future__ import annotations
@@ -129,7 +130,7 @@ class Worker:
             if error is None and item.job.on_done is not None:
                 try:
                     item.job.on_done(item.result)
-                except USER_ERRORS as exc:  # e.g. writing the reply to a file the user named
+                except USER_ERRORS as exc:  # a guard: a user's mistake is a status line, not a crash
                     error = exc
             if error is not None and item.job.on_error is not None:
                 item.job.on_error(error)

@@ -1,12 +1,12 @@
 """Tool actions: each submits one port call to the worker and applies the reply to the state.
 
 The same actions serve hands, keyboard shortcuts, panels and scripts. Replies are applied on the main
-thread (``Worker.drain``); nothing here waits.
+thread (``Worker.drain``); nothing here waits. File reads and writes (load, save, export) run inside the
+worker call, so ``on_done`` only updates the state.
 """
 
 from __future__ import annotations
 
-import contextlib
 import os
 import time
 from pathlib import Path
@@ -16,6 +16,7 @@ import numpy as np
 from arboretum_client.net import Worker
 from arboretum_library.codec import load_record, save_record
 from arboretum_library.errors import InputError
+from arboretum_library.export.gltf import write_atomic
 from arboretum_library.model import Assembly
 from arboretum_library.protocol import Edit, RefineState, SessionAssembly
 
@@ -148,13 +149,16 @@ class Actions:
             self._edit("redo", lambda p: p.redo())
 
     def save(self, path: str | os.PathLike) -> None:
-        def done(assembly: Assembly) -> None:
+        """Fetch the assembly and write it to ``path`` on the worker thread (never in the frame loop); an
+        unwritable path is a status line."""
+        def call(port, _):
+            assembly: Assembly = port.save()
             try:
                 save_record(path, assembly)
-            except OSError as exc:  # raised from here, it becomes the status line (Worker.drain)
+            except OSError as exc:
                 raise InputError(f"cannot write {path} ({exc.strerror or exc})") from None
-            self.state.say(f"saved {Path(path).name}")
-        self._submit("save", lambda p, _: p.save(), done)
+
+        self._submit("save", call, lambda _none: self.state.say(f"saved {Path(path).name}"))
 
     def load(self, path: str | os.PathLike) -> None:
         """Read ``path`` on the worker thread (never in the frame loop); a missing or bad file is a
@@ -185,21 +189,25 @@ class Actions:
         self.state.say(f"density {self.state.density:.2f}")
 
     def export(self, folder: str | os.PathLike, fmt: str = "glb") -> None:
-        def done(reply) -> None:
+        """Export the tree and write it into ``folder`` on the worker thread (never in the frame loop);
+        an unwritable folder is a status line and writes nothing."""
+        density = self.state.density
+
+        def call(port, progress):
+            reply = port.export_mesh(fmt, 0, {"density": density}, progress)
             path = Path(folder) / reply.name
-            tmp = path.with_name(f".{path.name}.tmp")
             try:
                 path.parent.mkdir(parents=True, exist_ok=True)
-                tmp.write_bytes(reply.data.tobytes())
-                os.replace(tmp, path)
+                write_atomic(path, reply.data.tobytes())
             except OSError as exc:
-                with contextlib.suppress(OSError):
-                    tmp.unlink(missing_ok=True)
                 raise InputError(f"cannot write {path} ({exc.strerror or exc})") from None
+            return path, len(reply.data)
+
+        def done(result: tuple[Path, int]) -> None:
+            path, size = result
             self.state.exported.append(str(path))
-            self.state.say(f"exported {path.name} ({len(reply.data)} bytes)")
-        self._submit("export", lambda p, progress: p.export_mesh(fmt, 0, {"density": self.state.density}, progress),
-                     done)
+            self.state.say(f"exported {path.name} ({size} bytes)")
+        self._submit("export", call, done)
 
     # -- refinement --------------------------------------------------------------------------------
     def _refine(self, name: str, call) -> int:
