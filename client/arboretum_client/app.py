@@ -28,6 +28,7 @@ from .input.hands import HAND_COLORS, LEFT, RIGHT, SIDES, Hands, HandSample
 from .net import Worker
 from .overlay import overlay_key, overlay_scene
 from .scene import Billboard
+from .scene_build import to_rgba8
 from .session_port import SessionPort
 from .tools.actions import Actions
 from .tools.interaction import Interaction
@@ -55,21 +56,6 @@ def load_reference(path: str | Path) -> np.ndarray:
         raise InputError(f"reference image {path}: no such file") from None
     except (OSError, UnidentifiedImageError) as exc:
         raise InputError(f"reference image {path}: cannot read it as an image ({exc})") from None
-
-
-def to_rgba8(im) -> np.ndarray:
-    """A Pillow image as (H, W, 4) uint8 RGBA. 16-bit grayscale (modes I;16*, and I as Pillow opens
-    16-bit PNGs) is scaled 0..65535 -> 0..255 (Pillow's own convert clips it to white); float
-    grayscale (F) is taken as 0..1 when it lies there, else as 0..255."""
-    if im.mode.startswith("I;16") or im.mode in ("I", "F"):
-        a = np.asarray(im).astype(np.float64)
-        if im.mode == "F":
-            a = a * 255.0 if np.nanmax(a, initial=0.0) <= 1.0 else a
-        else:
-            a = a / 257.0
-        g = np.clip(np.nan_to_num(a), 0, 255).round().astype(np.uint8)
-        return np.dstack([g, g, g, np.full_like(g, 255)])
-    return np.asarray(im.convert("RGBA"), np.uint8).copy()
 
 
 def reference_billboard(image: np.ndarray, height: float = 1.0) -> Billboard:

@@ -119,15 +119,29 @@ def mesh_scene(vertices: np.ndarray, faces: np.ndarray, color=(0.62, 0.55, 0.45,
     return _with_grid(Scene(items=(item,), names={1: "mesh"}), grid)
 
 
+def to_rgba8(im) -> np.ndarray:
+    """A Pillow image as a new (H, W, 4) uint8 RGBA array. 16-bit grayscale (modes I;16*, and I as
+    Pillow opens 16-bit PNGs) is scaled 0..65535 -> 0..255 (Pillow's own convert clips it to white);
+    float grayscale (F) is taken as 0..1 when it lies there, else as 0..255."""
+    if im.mode.startswith("I;16") or im.mode in ("I", "F"):
+        a = np.asarray(im).astype(np.float64)
+        if im.mode == "F":
+            a = a * 255.0 if np.nanmax(a, initial=0.0) <= 1.0 else a
+        else:
+            a = a / 257.0
+        g = np.clip(np.nan_to_num(a), 0, 255).round().astype(np.uint8)
+        return np.dstack([g, g, g, np.full_like(g, 255)])
+    return np.asarray(im.convert("RGBA"), np.uint8).copy()
+
+
 def texture_mean_color(image: bytes) -> np.ndarray:
     """(3,) mean RGB in 0..1 of an embedded PNG/JPEG, weighted by its alpha so cut-out texels do not
     count; white when pillow cannot decode it (the material's factor alone then gives the colour)."""
-    import io
-
     from PIL import Image
 
     try:
-        rgba = np.asarray(Image.open(io.BytesIO(image)).convert("RGBA"), np.float64) / 255.0
+        with Image.open(io.BytesIO(image)) as im:
+            rgba = to_rgba8(im).astype(np.float64) / 255.0
     except (OSError, ValueError):  # pillow's UnidentifiedImageError is an OSError
         return np.ones(3)
     alpha = rgba[..., 3:].reshape(-1, 1)
@@ -208,7 +222,7 @@ def decode_texture(data: bytes, source: str = "GLB") -> np.ndarray:
 
     try:
         with Image.open(io.BytesIO(data)) as im:
-            rgba = np.array(im.convert("RGBA"), np.uint8)
+            rgba = to_rgba8(im)
     except (UnidentifiedImageError, OSError, ValueError) as exc:
         raise InputError(f"{source}: an embedded texture is not a readable PNG or JPEG image ({exc})") from None
     rgba.flags.writeable = False
