@@ -11,17 +11,13 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import struct
-import tempfile
-import threading
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
-from pathlib import Path
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
+from arboretum_library.atomic import write_atomic
 from arboretum_library.geometry import zup_to_yup
 
 from .parts import Material, MeshPart, Node, local_origin
@@ -189,69 +185,6 @@ def pack_glb(b: _Builder) -> bytes:
     if b.blob:
         out += struct.pack("<I4s", len(b.blob), b"BIN\x00") + bytes(b.blob)
     return bytes(out)
-
-
-def _process_umask() -> int:
-    """The process's umask: from /proc on Linux (read, not changed), else set and restored once."""
-    try:
-        with open("/proc/self/status", encoding="ascii") as f:
-            for line in f:
-                if line.startswith("Umask:"):
-                    return int(line.split()[1], 8)
-    except (OSError, ValueError, IndexError):
-        pass
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-FILE_MODE = 0o666 & ~_process_umask()
-"""Mode of the files written here, read once at import (toggling the umask per write would race with
-other threads creating files)."""
-
-
-@contextmanager
-def _sigint_deferred() -> Iterator[None]:
-    """Hold Ctrl-C (SIGINT) back until the block ends, then raise ``KeyboardInterrupt``; only on the main
-    thread with Python's default handler installed (otherwise the block runs unchanged)."""
-    if (threading.current_thread() is not threading.main_thread()
-            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):  # fmt: skip
-        yield
-        return
-    caught: list[int] = []
-    signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, signal.default_int_handler)
-    if caught:
-        raise KeyboardInterrupt
-
-
-def write_files_atomic(files: Sequence[tuple[Path, bytes]]) -> None:
-    """Write every (path, data) to a temporary file beside it, then rename them in order with Ctrl-C held
-    back until the last rename (the set is replaced whole); on an error or interrupt before the renames,
-    every temporary file is removed and no ``path`` changes."""
-    temps: list[str] = []
-    try:
-        for path, data in files:
-            fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-            temps.append(tmp)
-            with os.fdopen(fd, "wb") as f:
-                f.write(data)
-            os.chmod(tmp, FILE_MODE)
-        with _sigint_deferred():
-            for (path, _), tmp in zip(files, temps):
-                os.replace(tmp, path)
-    except BaseException:
-        for tmp in temps:
-            Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def write_atomic(path: str | os.PathLike, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file and ``os.replace`` (no half-written files)."""
-    write_files_atomic([(Path(path), data)])
 
 
 def write_glb(path: str | os.PathLike, meshes: Sequence[MeshPart], materials: Sequence[Material],

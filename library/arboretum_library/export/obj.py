@@ -8,7 +8,7 @@ origin is the image's bottom-left, so v is flipped from the glTF convention of `
 The sidecars are named after the OBJ's stem (``tree.obj`` -> ``tree.mtl``, ``tree_bark.png``,
 ``tree_leaf.png``) so two exports in one folder do not overwrite each other. Existing files that
 Arboretum did not write are refused, and all files go to temporary names first and are renamed only
-once every one is written, with Ctrl-C held back until the last rename (``gltf.write_files_atomic``), so
+once every one is written, with Ctrl-C held back until the last rename (``atomic.write_files_atomic``), so
 an interrupt leaves the previous set or the new one, never a mix. The .mtl, which records the textures
 Arboretum owns, is renamed first and the .obj last.
 """
@@ -22,14 +22,20 @@ from pathlib import Path
 
 import numpy as np
 
+from arboretum_library.atomic import write_files_atomic
 from arboretum_library.errors import InputError
 from arboretum_library.geometry import zup_to_yup
 
-from .gltf import write_files_atomic
 from .parts import Material, MeshPart
 
 MTL_HEADER = "# arboretum MTL\n"
 _HEADER = re.compile(r"# arboretum OBJ \(([YZ]) up\b")
+
+
+def obj_header(y_up: bool = True) -> str:
+    """The first line (without newline) of the OBJ files Arboretum writes, naming the up axis that
+    ``obj_up_axis`` reads back: '# arboretum OBJ (Y up, metres)' or '... (Z up, metres)'."""
+    return f"# arboretum OBJ ({'Y' if y_up else 'Z'} up, metres)"
 
 
 def _rows(fmt: str, arr: np.ndarray) -> str:
@@ -45,7 +51,7 @@ def obj_text(meshes: Sequence[MeshPart], materials: Sequence[Material], mtl_name
     """The OBJ text: one group per mesh, ``usemtl`` its material, faces as v/vt/vn triples.
 
     Positions are written with 6 decimals (1 µm at any magnitude: 16 digits at 1e7 m)."""
-    out = [f"# arboretum OBJ ({'Y' if y_up else 'Z'} up, metres)\n", f"mtllib {mtl_name}\n"]
+    out = [obj_header(y_up) + "\n", f"mtllib {mtl_name}\n"]
     offset = 1
     for part in meshes:
         pos = zup_to_yup(part.positions) if y_up else part.positions

@@ -14,7 +14,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .gltf import write_atomic
+from arboretum_library.atomic import write_atomic
+
 from .parts import MeshPart
 
 FLOAT32_LIMIT = 1024.0

@@ -14,9 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from arboretum_library.atomic import write_atomic
 from arboretum_library.errors import InputError
-
-from .gltf import write_atomic
 
 FORMAT = "arboretum-skeleton"
 

@@ -14,8 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
+from arboretum_library.atomic import write_atomic
 from arboretum_library.errors import InputError
-from arboretum_library.export.gltf import glb_bytes, write_atomic
+from arboretum_library.export.gltf import glb_bytes
 from arboretum_library.export.instanced import instanced_glb_bytes, plain_nodes_glb_bytes
 from arboretum_library.export.parts import Material, MeshPart
 
