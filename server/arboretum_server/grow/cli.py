@@ -50,19 +50,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def check_obj_sidecars(out: Path) -> None:
-    """An .obj ``out``: its .mtl and textures refused now, not after growth, when Arboretum did not write
-    them (``export.obj.check_sidecars`` with the materials ``writers.write_mesh`` uses)."""
-    if out.suffix.lower() == ".obj":
-        from arboretum_library.export.obj import check_sidecars
-        from arboretum_server.mesh.scene import tree_materials
-
-        check_sidecars(out, tree_materials())
-
-
 def _check_args(args: argparse.Namespace) -> tuple[Path, Path | None]:
     """Every argument checked before any work: the output paths, then the numbers."""
     from arboretum_server.mesh.lod import check_lod
+
+    from .writers import check_obj_sidecars
 
     check_input_file(args.hbl, "HBL_OR_ASSEMBLY")
     out = Path(args.out)
@@ -119,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
         "out": str(out), "bytes": size, "skeleton": str(skel) if skel else None,
         "seed": args.seed, "branches": len(hbl.branches), "lobes": len(hbl.lobes),
         "lod": args.lod, "step": tree.step, "iterations": tree.iterations, "nodes": len(tree.positions),
-        "twig_nodes": tree.twig_count, "leaves": int(len(mesh.leaves.faces) // 2),
+        "twig_nodes": tree.twig_count, "leaves": mesh.cards,
         "bark_triangles": int(len(mesh.bark.faces)), "triangles": mesh.triangles,
         "trunk_radius": float(tree.radii[0]),
         "timing_s": {"grow": t1 - t0, "mesh": t2 - t1, "write": t3 - t2},

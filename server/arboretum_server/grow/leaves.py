@@ -49,7 +49,7 @@ def place_leaves(positions: np.ndarray, parents: np.ndarray, lobe: np.ndarray,
     factor = rng.uniform(0.8, 1.2, k)
     sizes = size * factor
     centres = positions[node] + axis * sizes[:, None] / 2
-    probe = centres if opts.leaf_size is None else positions[node] + axis * (base * factor)[:, None] / 2
+    probe = positions[node] + axis * (base * factor)[:, None] / 2
     keep = inside(index, probe, lobe[node])
     return Leaves(centres[keep], normal[keep], axis[keep], sizes[keep], lobe[node][keep])
 

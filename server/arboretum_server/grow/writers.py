@@ -5,12 +5,19 @@ from __future__ import annotations
 from pathlib import Path
 
 from arboretum_library.export.gltf import write_glb
-from arboretum_library.export.obj import write_obj
+from arboretum_library.export.obj import check_sidecars, write_obj
 from arboretum_library.export.ply import write_mesh_ply, write_skeleton_ply
 from arboretum_library.export.skeleton import write_skeleton_json
 from arboretum_server.mesh.scene import TreeMesh, tree_materials
 
 from .skeleton import GrownTree
+
+
+def check_obj_sidecars(out: Path) -> None:
+    """An .obj ``out``: its .mtl and textures refused now, not after growth, when Arboretum did not write
+    them (``export.obj.check_sidecars`` with the materials ``write_mesh`` uses)."""
+    if out.suffix.lower() == ".obj":
+        check_sidecars(out, tree_materials())
 
 
 def write_mesh(path: Path, mesh: TreeMesh) -> int:

@@ -37,6 +37,11 @@ class TreeMesh:
     def triangles(self) -> int:
         return int(len(self.bark.faces) + len(self.leaves.faces))
 
+    @property
+    def cards(self) -> int:
+        """Leaf cards in ``leaves`` (2 triangles each, ``cards.card_mesh``; clustered above LOD 0)."""
+        return len(self.leaves.faces) // 2
+
 
 def tree_materials(textures: bool = True) -> list[Material]:
     """Bark (opaque, tiled texture) and leaves (alpha-masked, double-sided) from ``assets/textures``."""

@@ -9,11 +9,8 @@ import numpy as np
 
 from arboretum_library.checks import check_input_file
 from arboretum_library.errors import InputError
-from arboretum_library.export.obj import obj_up_axis
+from arboretum_library.export.obj import obj_header, obj_up_axis
 from arboretum_library.geometry import yup_to_zup
-
-OBJ_HEADER = "# arboretum OBJ (Z up, metres)"
-"""First line of the OBJ files ``save_obj`` writes; ``obj_up_axis`` reads the axis from it."""
 
 
 def load_mesh(path: str | Path, what: str = "module mesh") -> tuple[np.ndarray, np.ndarray]:
@@ -51,7 +48,7 @@ def save_obj(path: str | Path, vertices: np.ndarray, faces: np.ndarray, comment:
     ``load_mesh`` reads it back unchanged) via a temporary file."""
     path = Path(path)
     tmp = path.with_suffix(path.suffix + ".tmp")
-    lines = [OBJ_HEADER] + [f"# {line}" for line in comment.splitlines()]
+    lines = [obj_header(y_up=False)] + [f"# {line}" for line in comment.splitlines()]
     lines += [f"v {x:.5f} {y:.5f} {z:.5f}" for x, y, z in np.asarray(vertices, dtype=np.float64)]
     lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in np.asarray(faces, dtype=np.int64)]
     tmp.write_text("\n".join(lines) + "\n")

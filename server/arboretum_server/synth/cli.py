@@ -101,7 +101,7 @@ def _check(args: argparse.Namespace) -> None:
         check_output(args.truth, "--truth", outputs=[args.out], suffixes=(".npz",))
     if args.mesh is not None:
         check_output(args.mesh, "--mesh", outputs=[args.out, args.truth], suffixes=MESH_FORMATS)
-        from arboretum_server.grow.cli import check_obj_sidecars
+        from arboretum_server.grow.writers import check_obj_sidecars
 
         check_obj_sidecars(args.mesh)
 

@@ -42,8 +42,7 @@ def export_mesh_job(progress, hbl: HBL, format: str, seed: int, lod: int, option
             name, data = "tree-obj.zip", buf.getvalue()
         else:
             name, data = path.name, path.read_bytes()
-    stats = {"triangles": mesh.triangles, "twig_nodes": tree.twig_count,
-             "leaves": int(len(mesh.leaves.faces) // 2)}  # the cards written (clustered above LOD 0)
+    stats = {"triangles": mesh.triangles, "twig_nodes": tree.twig_count, "leaves": mesh.cards}
     return {"name": name, "data": np.frombuffer(data, np.uint8), "stats": stats}
 
 
