@@ -106,7 +106,7 @@ def test_module_set_save_load(tmp_path):
 
 def test_bad_inputs_raise_input_error(tmp_path):
     with pytest.raises(InputError, match="unsupported"):
-        load_mesh(tmp_path / "x.ply")
+        load_mesh(tmp_path / "x.stl")
     with pytest.raises(InputError, match="no such file"):
         load_mesh(tmp_path / "x.obj")
     with pytest.raises(InputError, match="no .obj"):

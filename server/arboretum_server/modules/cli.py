@@ -45,23 +45,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _crown_mesh(path: str):
-    import numpy as np
-
     from .meshio import load_mesh
 
-    p = Path(path)
-    if p.suffix.lower() != ".ply":
-        return load_mesh(p, "--crown")
-    import trimesh
-
-    try:
-        mesh = trimesh.load(p, force="mesh", process=True)
-    except Exception as exc:  # trimesh raises many types on malformed files
-        raise InputError(f"--crown {p}: cannot be read ({exc})") from exc
-    faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), np.int32).reshape(-1, 3)
-    if len(faces) == 0:
-        raise InputError(f"--crown {p}: has no triangles (a point cloud? give a closed mesh)")
-    return np.asarray(mesh.vertices, np.float64), faces
+    return load_mesh(path, "--crown")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -14,8 +14,8 @@ from arboretum_library.geometry import yup_to_zup
 
 
 def load_mesh(path: str | Path, what: str = "module mesh") -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (V, 3) float64 Z up and faces (F, 3) int32 of the mesh in ``path`` (.obj, .glb, .gltf);
-    errors name it as ``what`` (e.g. ``--crown``).
+    """Vertices (V, 3) float64 Z up and faces (F, 3) int32 of the mesh in ``path`` (.obj, .glb, .gltf,
+    and .ply, which is read Z up as we write it); errors name it as ``what`` (e.g. ``--crown``).
 
     glTF is Y up and converted. OBJ is Y up and converted too (as ``export.obj.write_obj``, Blender and
     Maya write it) unless its header says Z up (``arboretum_library.export.obj.obj_up_axis``), as
@@ -25,9 +25,9 @@ def load_mesh(path: str | Path, what: str = "module mesh") -> tuple[np.ndarray, 
 
     path = Path(path)
     suffix = path.suffix.lower()
-    if suffix not in (".obj", ".glb", ".gltf"):
+    if suffix not in (".obj", ".glb", ".gltf", ".ply"):
         raise InputError(
-            f"{what} {path}: unsupported format {suffix!r} (use .obj, .glb or .gltf)"
+            f"{what} {path}: unsupported format {suffix!r} (use .obj, .ply, .glb or .gltf)"
         )
     check_input_file(str(path), what)
     try:
@@ -35,9 +35,11 @@ def load_mesh(path: str | Path, what: str = "module mesh") -> tuple[np.ndarray, 
     except Exception as exc:  # trimesh raises many types on malformed files
         raise InputError(f"{what} {path}: cannot be read ({exc})") from exc
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
-    faces = np.asarray(mesh.faces, dtype=np.int32)
+    faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int32).reshape(-1, 3)
     if len(faces) == 0:
-        raise InputError(f"{what} {path}: has no triangles")
+        raise InputError(f"{what} {path}: has no triangles (a point cloud? give a closed mesh)")
+    if suffix == ".ply":
+        return vertices, faces
     if suffix != ".obj" or obj_up_axis(path) == "y":
         vertices = yup_to_zup(vertices)
     return vertices, faces
