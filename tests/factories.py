@@ -7,7 +7,10 @@ Same Generator state, same record, on every machine.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import fcntl
+from pathlib import Path
 
 import numpy as np
 
@@ -136,3 +139,15 @@ def assert_examples_equal(a: Example, b: Example) -> None:
         assert arr.dtype == other.dtype and arr.shape == other.shape, key
         assert arr.tobytes() == other.tobytes(), key
     assert dataclasses.asdict(a.descriptors) == dataclasses.asdict(b.descriptors)
+
+
+@contextlib.contextmanager
+def held_lock(path: Path):
+    """Hold LIB/.lock as another writing process would (a separate open file, so flock excludes this
+    process's own Library too)."""
+    with open(Path(path) / ".lock", "a+b") as f:
+        fcntl.flock(f.fileno(), fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f.fileno(), fcntl.LOCK_UN)

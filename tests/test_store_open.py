@@ -3,8 +3,6 @@ and how the commands that only read a library (``library list``, ``assemble``) o
 
 from __future__ import annotations
 
-import contextlib
-import fcntl
 import threading
 import time
 from pathlib import Path
@@ -16,7 +14,7 @@ from arboretum_library.errors import InputError, StoreError
 from arboretum_library.store import LOCK_TIMEOUT_S, CatalogDamaged, Library, LibraryBusy
 from arboretum_library.store_lock import WriteLock
 from arboretum_server.assembly.cli import open_library, read_script
-from factories import make_example
+from factories import held_lock, make_example
 
 N = 4
 
@@ -28,17 +26,6 @@ def lib_path(tmp_path) -> Path:
         for i in range(N):
             lib.add(make_example(np.random.default_rng(i), id=f"ex-{i}", n_lobes=3))
     return path
-
-
-@contextlib.contextmanager
-def held_lock(path: Path):
-    """Hold LIB/.lock as another writing process would."""
-    with open(path / ".lock", "a+b") as f:
-        fcntl.flock(f.fileno(), fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(f.fileno(), fcntl.LOCK_UN)
 
 
 def _garble_catalog(path: Path) -> None:

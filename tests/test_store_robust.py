@@ -3,8 +3,6 @@ example replaced behind the server's back, and filters with very many tags."""
 
 from __future__ import annotations
 
-import contextlib
-import fcntl
 import json
 import os
 import signal
@@ -23,7 +21,7 @@ from arboretum_library import protocol as P
 from arboretum_library.cli import main
 from arboretum_library.errors import StoreError
 from arboretum_library.store import CatalogDamaged, Library, LibraryBusy
-from factories import assert_examples_equal, make_example
+from factories import assert_examples_equal, held_lock, make_example
 
 N = 6
 
@@ -35,17 +33,6 @@ def lib_path(tmp_path) -> Path:
         for i in range(N):
             lib.add(make_example(np.random.default_rng(i), id=f"ex-{i}", n_lobes=7 if i % 3 else 2, curved=i % 2 == 0))
     return path
-
-
-@contextlib.contextmanager
-def held_lock(path: Path):
-    """Hold LIB/.lock as another writer would (a separate open file, so flock excludes us too)."""
-    with open(path / ".lock", "a+b") as f:
-        fcntl.flock(f.fileno(), fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(f.fileno(), fcntl.LOCK_UN)
 
 
 def _context(path: Path, tmp_path: Path, **options):
