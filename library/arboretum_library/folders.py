@@ -178,6 +178,22 @@ def safe_prefix(text: str) -> str:
     return re.sub(r"[^\w-]", "-", text).strip("-_")[:110] or "ex"
 
 
+QUARANTINE = "quarantine"
+"""Folder beside ``examples`` where recovery moves damaged example folders, each as ``ID-HEX``."""
+
+
+def quarantine_name(id_: str, token: str) -> str:
+    """The name a damaged example ``id_``'s folder gets in ``QUARANTINE`` (``token``: a few hex digits that
+    keep two quarantines of one id apart)."""
+    return f"{id_}-{token}"
+
+
+def quarantined(root: Path) -> list[tuple[str, Path]]:
+    """(example id, folder) of every folder in the library at ``root``'s ``QUARANTINE`` (none if absent)."""
+    qdir = Path(root) / QUARANTINE
+    return [(q.name.rsplit("-", 1)[0], q) for q in qdir.iterdir()] if qdir.is_dir() else []
+
+
 def free_ids(taken_ids: list[str], examples: Path, prefix: str, count: int) -> list[str]:
     """``count`` ids ``PREFIX-NNNN`` after the highest number with that prefix in ``taken_ids`` or among
     the folders in ``quarantine/`` beside ``examples`` (named ``ID-HEX``, see ``recovery``: a damaged
@@ -185,9 +201,8 @@ def free_ids(taken_ids: list[str], examples: Path, prefix: str, count: int) -> l
     (``prefix`` made safe first, ``safe_prefix``)."""
     prefix = safe_prefix(prefix)
     pattern = re.compile(re.escape(prefix) + r"-(\d+)$")
-    qdir = examples.parent / "quarantine"
-    quarantined = [q.name.rsplit("-", 1)[0] for q in qdir.iterdir()] if qdir.is_dir() else []
-    taken = [int(m.group(1)) for i in [*taken_ids, *quarantined] if (m := pattern.match(i))]
+    held = [id_ for id_, _ in quarantined(examples.parent)]
+    taken = [int(m.group(1)) for i in [*taken_ids, *held] if (m := pattern.match(i))]
     out, n = [], max(taken, default=0) + 1
     while len(out) < count:
         if not (examples / f"{prefix}-{n:04d}").exists():

@@ -24,7 +24,15 @@ from pathlib import Path
 
 from . import catalog
 from .errors import StoreError
-from .folders import fsync_path, now_utc, read_folder, valid_id, write_bytes
+from .folders import (
+    QUARANTINE,
+    fsync_path,
+    now_utc,
+    quarantine_name,
+    read_folder,
+    valid_id,
+    write_bytes,
+)
 
 JOURNAL_PREFIX = "journal-"
 CATALOG = "catalog.sqlite"
@@ -127,9 +135,9 @@ def _finish(con: sqlite3.Connection, root: Path, journal: dict, report: Recovery
 
 
 def _quarantine(con: sqlite3.Connection, root: Path, path: Path, report: Recovery) -> None:
-    qdir = root / "quarantine"
+    qdir = root / QUARANTINE
     qdir.mkdir(exist_ok=True)
-    name = f"{path.name}-{secrets.token_hex(4)}"
+    name = quarantine_name(path.name, secrets.token_hex(4))
     os.rename(path, qdir / name)
     _transaction(con)
     catalog.remove(con, [path.name])

@@ -111,18 +111,17 @@ def _damaged(lib, r, ids: list[str]) -> bool:
     opened after a crash): a quarantined folder of this scan (by its provenance, or by its id's prefix
     when its meta.json is unreadable) whose id is no longer in the library, moved there after the scan's
     examples were stored (an older one was handled by an earlier build, which stored them again)."""
-    from arboretum_library.folders import read_provenance
+    from arboretum_library.folders import quarantined, read_provenance
 
-    qdir = Path(lib.root) / "quarantine"
-    if not qdir.is_dir():  # the common case: no meta.json read at all (_skip reads it once)
+    held = quarantined(lib.root)
+    if not held:  # the common case: no meta.json read at all (_skip reads it once)
         return False
     want = lib.provenance(ids[0]).parameters.get(SCAN_EXAMPLES_KEY)
     if want is None or len(ids) >= int(want):
         return False
     stem = scan_stem(r.path)
     stored = max((_ctime(Path(lib.root) / "examples" / i) for i in ids), default=0.0)
-    for folder in qdir.iterdir():
-        id_ = folder.name.rsplit("-", 1)[0]
+    for id_, folder in held:
         if id_ in ids or id_ in lib or not id_.startswith(f"{stem}-") or _ctime(folder) < stored:
             continue  # not this scan's, or quarantined before its examples were (re)stored
         try:
