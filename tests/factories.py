@@ -151,3 +151,19 @@ def held_lock(path: Path):
             yield
         finally:
             fcntl.flock(f.fileno(), fcntl.LOCK_UN)
+
+
+@contextlib.contextmanager
+def serving(server):
+    """Run ``server`` (a ``service.socket.Server``) on a daemon thread; stop it and wait for the thread on
+    exit (at most 10 s), asserting it ended."""
+    import threading
+
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield server
+    finally:
+        server.stop_event.set()
+        thread.join(10)
+    assert not thread.is_alive()

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import logging
-import threading
 import time
 
 import msgpack
@@ -26,7 +25,7 @@ from arboretum_server.service.context import Context
 from arboretum_server.service.dispatch import Dispatcher
 from arboretum_server.service.sessions import Sessions
 from arboretum_server.service.socket import Server
-from factories import make_library
+from factories import make_library, serving
 
 NAMES = ("a", "b", "c", "d", "e", "f")
 ALL = tuple(Placement(n, "ex-0", make_transform(t=[0, 0, 0.1 * i])) for i, n in enumerate(NAMES))
@@ -157,12 +156,8 @@ def test_sessions_with_a_cyclic_snapshot_or_journal_entry_are_moved_to_damaged(t
 @pytest.fixture
 def served(tmp_path):
     ctx = Context(Sessions(tmp_path / "state"), make_library(tmp_path / "lib", 2))
-    server = Server(Dispatcher(ctx), "tcp://127.0.0.1:0")
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    yield server
-    server.stop_event.set()
-    thread.join(10)
+    with serving(Server(Dispatcher(ctx), "tcp://127.0.0.1:0")) as server:
+        yield server
     ctx.close()
 
 

@@ -30,6 +30,12 @@ def _scene():
     return [bark, card], mats
 
 
+def _swapped_textures() -> list[Material]:
+    """The scene's two materials with their textures swapped: a re-export whose files all differ."""
+    return [Material("bark", texture_png=LEAF, texture_name="bark.png"),
+            Material("leaf", texture_png=BARK, texture_name="leaf.png", alpha_cutoff=0.5)]
+
+
 def _names(folder) -> list[str]:
     return sorted(p.name for p in folder.iterdir())
 
@@ -117,8 +123,7 @@ def test_interrupt_keeps_the_previous_export(tmp_path, monkeypatch):
 
     monkeypatch.setattr(obj.os, "replace", replace)
     parts, mats = _scene()
-    mats = [Material("bark", texture_png=LEAF, texture_name="bark.png"),
-            Material("leaf", texture_png=BARK, texture_name="leaf.png", alpha_cutoff=0.5)]
+    mats = _swapped_textures()
     with pytest.raises(KeyboardInterrupt):
         write_obj(tmp_path / "tree.obj", parts[:1], mats)
     assert {n: (tmp_path / n).read_bytes() for n in _names(tmp_path)} == before
@@ -139,8 +144,7 @@ def test_ctrl_c_during_the_renames_is_held_back_until_the_set_is_whole(tmp_path,
 
     monkeypatch.setattr(obj.os, "replace", replace)
     parts, _ = _scene()
-    mats = [Material("bark", texture_png=LEAF, texture_name="bark.png"),
-            Material("leaf", texture_png=BARK, texture_name="leaf.png", alpha_cutoff=0.5)]
+    mats = _swapped_textures()
     with pytest.raises(KeyboardInterrupt):
         write_obj(tmp_path / "tree.obj", parts[:1], mats)
     assert [p.rsplit("/", 1)[1] for p in calls] == ["tree.mtl", "tree_bark.png", "tree_leaf.png", "tree.obj"]
@@ -169,8 +173,7 @@ def test_a_broken_first_export_does_not_block_the_next(tmp_path, monkeypatch):
         write_obj(tmp_path / "tree.obj", parts, mats)
     monkeypatch.setattr(obj.os, "replace", real)
     assert not any(n.endswith(".tmp") for n in _names(tmp_path))
-    mats = [Material("bark", texture_png=LEAF, texture_name="bark.png"),
-            Material("leaf", texture_png=BARK, texture_name="leaf.png", alpha_cutoff=0.5)]
+    mats = _swapped_textures()
     write_obj(tmp_path / "tree.obj", parts, mats)
     assert (tmp_path / "tree_bark.png").read_bytes() == LEAF and (tmp_path / "tree_leaf.png").read_bytes() == BARK
 

@@ -21,7 +21,7 @@ from arboretum_server.service.dispatch import Dispatcher, load_handlers
 from arboretum_server.service.jobs import Job, JobRunner
 from arboretum_server.service.sessions import Sessions
 from arboretum_server.service.socket import Server
-from factories import make_example
+from factories import make_example, serving
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -63,14 +63,9 @@ def served(tmp_path):
     handlers[P.ExportMesh] = slow_export
     handlers[P.Grow] = lambda ctx, req: Job(f"{__name__}:dying_job", {}, lambda r: P.Ack())
     handlers[P.ExportModules] = lambda ctx, req: Job(f"{__name__}:refusing_job", {}, lambda r: P.Ack())
-    server = Server(Dispatcher(ctx, handlers), "tcp://127.0.0.1:0", jobs=JobRunner(2))
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    yield server
-    server.stop_event.set()
-    thread.join(10)
+    with serving(Server(Dispatcher(ctx, handlers), "tcp://127.0.0.1:0", jobs=JobRunner(2))) as server:
+        yield server
     ctx.close()
-    assert not thread.is_alive()
 
 
 def raw_socket(server: Server) -> zmq.Socket:
