@@ -244,7 +244,7 @@ def remember_plain(members: np.ndarray, tet: Tetrahedra) -> None:
 def _recall_plain(members: np.ndarray, points: np.ndarray) -> Tetrahedra | None:
     """The ``Tetrahedra`` remembered for ``members`` if it was built from ``points`` (its lobe's points)."""
     hit = _PLAIN.get(id(members))
-    ok = hit is not None and hit[0]() is members and np.array_equal(hit[1].points, points)
+    ok = hit is not None and hit[0]() is members and np.array_equal(hit[1].source, points)
     return hit[1] if ok else None
 
 
