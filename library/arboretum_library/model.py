@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Iterator, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field, replace
 from enum import IntEnum
 from typing import Any
 
@@ -129,6 +129,13 @@ class Lobe:
             raise ValidationError(f"Lobe.hull_faces: indices must lie in 0..{len(verts) - 1}")
 
 
+_HBL_POSITIONS = ("root", "points")
+_BRANCH_POSITIONS = ("points",)
+_LOBE_POSITIONS = ("points", "hull_vertices", "centre")
+"""The position fields (metres, frame of the structure) of an HBL and of its branches and lobes: the one
+list ``HBL.arrays`` walks and ``HBL.map_positions`` maps."""
+
+
 @dataclass(frozen=True, eq=False)
 class HBL:
     """A Hierarchical Branch-Lobe structure: a whole tree, or the content of one example.
@@ -169,19 +176,30 @@ class HBL:
             if lobe.branch >= len(self.branches):
                 raise ValidationError(f"HBL.lobes[{j}].branch: {lobe.branch} is out of range")
 
-    def arrays(self) -> Iterator[tuple[str, np.ndarray]]:
-        """(field path, array) of every coordinate and radius the structure holds, e.g.
-        ``("lobes[2].hull_vertices", (V, 3) array)``: the root, source points, branch points and radii,
-        lobe points, hull vertices and centres (metres)."""
-        yield "root", self.root
-        yield "points", self.points
+    def arrays(self, radii: bool = True) -> Iterator[tuple[str, np.ndarray]]:
+        """(field path, array) of every coordinate (and, with ``radii``, every radius) the structure holds,
+        e.g. ``("lobes[2].hull_vertices", (V, 3) array)``: the root, source points, branch points and radii,
+        lobe points, hull vertices and centres (metres). Without ``radii``: exactly the arrays that
+        ``map_positions`` maps."""
+        for name in _HBL_POSITIONS:
+            yield name, getattr(self, name)
+        branch_fields = (*_BRANCH_POSITIONS, "radii") if radii else _BRANCH_POSITIONS
         for i, b in enumerate(self.branches):
-            yield f"branches[{i}].points", b.points
-            yield f"branches[{i}].radii", b.radii
+            for name in branch_fields:
+                yield f"branches[{i}].{name}", getattr(b, name)
         for j, lb in enumerate(self.lobes):
-            yield f"lobes[{j}].points", lb.points
-            yield f"lobes[{j}].hull_vertices", lb.hull_vertices
-            yield f"lobes[{j}].centre", lb.centre
+            for name in _LOBE_POSITIONS:
+                yield f"lobes[{j}].{name}", getattr(lb, name)
+
+    def map_positions(self, fn: Callable[[np.ndarray], Any]) -> HBL:
+        """A new (validated) HBL with every position array ``a`` of ``arrays(radii=False)`` replaced by
+        ``fn(a)`` (same shape), e.g. ``lambda a: a + offset`` to move it; radii, topology and labels kept."""
+        def mapped(rec, names: tuple[str, ...]):
+            return replace(rec, **{n: fn(getattr(rec, n)) for n in names})
+
+        return replace(self, branches=tuple(mapped(b, _BRANCH_POSITIONS) for b in self.branches),
+                       lobes=tuple(mapped(lb, _LOBE_POSITIONS) for lb in self.lobes),
+                       **{n: fn(getattr(self, n)) for n in _HBL_POSITIONS})
 
     @functools.cached_property
     def extent(self) -> float:

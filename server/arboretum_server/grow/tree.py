@@ -30,7 +30,7 @@ def grow_tree(hbl: HBL, opts: GrowOptions, rng: np.random.Generator,
     """
     origin = growth_origin(hbl)
     if origin.any():
-        tree = grow_tree(translated(hbl, -origin), opts, rng, progress)
+        tree = grow_tree(hbl.map_positions(lambda a: a - origin), opts, rng, progress)
         lv = tree.leaves
         leaves = Leaves(lv.centres + origin, lv.normals, lv.axes, lv.sizes, lv.lobe)
         return dataclasses.replace(tree, positions=tree.positions + origin, leaves=leaves)
@@ -61,16 +61,6 @@ def growth_origin(hbl: HBL) -> np.ndarray:
     from coordinates near it is exact.
     """
     return np.round(np.asarray(hbl.root, np.float64)) + 0.0
-
-
-def translated(hbl: HBL, offset: np.ndarray) -> HBL:
-    """``hbl`` moved by ``offset`` (3,): root, branch points, lobe points, hulls, centres, source points."""
-    off = np.asarray(offset, np.float64)
-    branches = tuple(dataclasses.replace(b, points=b.points + off) for b in hbl.branches)
-    lobes = tuple(dataclasses.replace(lb, points=lb.points + off, hull_vertices=lb.hull_vertices + off,
-                                      centre=lb.centre + off) for lb in hbl.lobes)
-    return dataclasses.replace(hbl, root=hbl.root + off, branches=branches, lobes=lobes,
-                               points=hbl.points + off)
 
 
 def _radii(hbl: HBL, graph: BranchGraph, parents: np.ndarray, lobe: np.ndarray, opts: GrowOptions,
