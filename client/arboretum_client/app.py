@@ -36,6 +36,7 @@ from .tools.state import MODELING, REFINEMENT, ClientState
 from .tools.view import TouchIndex, build_scene
 from .ui.layout import PANEL_X, draw_ui, panel_width, ui_key
 from .ui.widgets import Canvas
+from .ui_actions import run_action
 
 TOUCH_RADIUS = 0.06
 """Metres: a VR touch ball this close to an item touches it."""
@@ -133,32 +134,9 @@ class App:
         s.ui_version += 1
 
     def ui_action(self, action: str) -> None:
-        """Run a panel button's action (also used by scripts)."""
-        s, a = self.state, self.actions
-        head, _, arg = action.partition(":")
-        simple = {"undo": a.undo, "redo": a.redo, "menu": self.interaction.menu, "touchpad": self.interaction.touchpad,
-                  "grow": a.grow, "export": lambda: a.export(self.out_dir), "mode": self.toggle_mode,
-                  "save": lambda: a.save(self.out_dir / "session.npz"), "commit": a.commit_refinement,
-                  "load": lambda: a.load(self.out_dir / "session.npz"), "noop": lambda: None,
-                  "reference": self.toggle_reference}
-        if action in simple:
-            simple[action]()
-        elif head == "search":
-            s.search_focus = True
-        elif head == "tag":
-            s.tag_filter = "" if s.tag_filter == arg else arg
-            a.refresh_library()
-        elif head == "choose":
-            a.choose(arg)
-        elif head == "toggle":
-            setattr(s, arg, not getattr(s, arg))
-            s.touch_scene()
-        elif head == "density":
-            a.set_density(s.density * (1.25 if arg == "+" else 0.8))
-        elif head == "focus":
-            s.focus += 1
-            s.touch_scene()
-        s.ui_version += 1
+        """Run a panel button's action (also used by shortcuts and scripts): ``ui_actions.run_action``."""
+        run_action(self, action)
+        self.state.ui_version += 1
 
     def toggle_mode(self) -> None:
         s = self.state

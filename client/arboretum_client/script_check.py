@@ -15,16 +15,13 @@ from arboretum_library.errors import InputError
 from .camera import VIEWS
 from .input.hands import BUTTONS as HAND_BUTTONS
 from .input.hands import SIDES
+from .ui_actions import SIMPLE, WITH_ARG
 
 MOUSE_BUTTONS = ("left", "right", "middle")
 MODIFIERS = ("ctrl", "shift", "alt")
 NAMED_KEYS = frozenset({"tab", "enter", "escape", "backspace", "delete", "space", *MODIFIERS,
                         *(f"f{i}" for i in range(1, 13))})
 """Key names besides single printable characters (lower case, as the window reports them)."""
-SIMPLE_ACTIONS = frozenset({"undo", "redo", "menu", "touchpad", "grow", "export", "mode", "save", "commit",
-                            "load", "noop", "reference"})
-TOGGLES = ("show_points", "show_all")
-TAGS = ("straight", "curved", "dense", "sparse")
 MAX_WAIT = 3600.0
 """Seconds: a longer ``wait`` is surely a typo (it would run 108,000 virtual frames)."""
 
@@ -66,19 +63,19 @@ def _wait(v) -> str | None:
 
 
 def check_action(v) -> str | None:
-    """None if ``v`` is an action ``App.ui_action`` knows, else the problem."""
+    """None if ``v`` is an action ``App.ui_action`` runs (``ui_actions``), else the problem."""
     if not isinstance(v, str):
         return f"expected an action name, got {v!r}"
-    head, sep, arg = v.partition(":")
-    if v in SIMPLE_ACTIONS or head in ("search", "focus"):
+    head, _, arg = v.partition(":")
+    entry = WITH_ARG.get(head)
+    if v in SIMPLE:
         return None
-    allowed = {"tag": TAGS, "toggle": TOGGLES, "density": ("+", "-")}.get(head)
-    if allowed is not None:
-        return None if arg in allowed else f"{head}: expects one of {', '.join(allowed)}, got {arg!r}"
-    if head == "choose":
-        return None if arg.strip() else "choose: needs an example id, e.g. choose:oak-0001"
-    return f"unknown action {v!r} (one of {', '.join(sorted(SIMPLE_ACTIONS))}, or choose:ID, tag:T, toggle:T, " \
-           "density:+/-, search:, focus:+)"
+    if entry is None:
+        return f"unknown action {v!r} (one of {', '.join(sorted(SIMPLE))}, or choose:ID, tag:T, toggle:T, " \
+               "density:+/-, search:, focus:+)"
+    if entry.choices is not None:
+        return None if arg in entry.choices else f"{head}: expects one of {', '.join(entry.choices)}, got {arg!r}"
+    return f"{head}: needs {entry.needs}" if entry.needs and not arg.strip() else None
 
 
 def _stroke(v) -> str | None:

@@ -1,7 +1,8 @@
 """glfw callbacks -> the desktop input records the App handles (the only glfw input code).
 
-Cursor positions come in window units and are scaled to framebuffer pixels (HiDPI); a framebuffer size
-change (resize, maximise) resizes the renderer and the UI (``App.resize``)."""
+Cursor positions come in window units and are scaled to framebuffer pixels (HiDPI) by a scale asked of
+glfw once and again on each framebuffer size change (resize, maximise, a move to a screen of another
+density), never per mouse move; that change also resizes the renderer and the UI (``App.resize``)."""
 
 from __future__ import annotations
 
@@ -43,10 +44,12 @@ def cursor_scale(window) -> tuple[float, float]:
 
 def install_callbacks(window, app) -> None:
     """Route glfw's mouse, scroll and key callbacks of ``window`` into ``app.handle`` (cursor positions
-    mapped from window units to framebuffer pixels), and framebuffer size changes into ``app.resize``."""
+    mapped from window units to framebuffer pixels by ``cursor_scale``, kept from the last framebuffer
+    size change), and framebuffer size changes into ``app.resize``."""
     import glfw
 
     table = key_table()
+    scale = [cursor_scale(window)]
 
     def on_key(_w, key, scancode, action, _mods):
         if action == glfw.REPEAT:
@@ -55,12 +58,13 @@ def install_callbacks(window, app) -> None:
         if name:
             handle_safely(app, Key(name, action == glfw.PRESS))
 
-    def on_cursor(w, x, y):
-        sx, sy = cursor_scale(w)
+    def on_cursor(_w, x, y):
+        sx, sy = scale[0]
         handle_safely(app, MouseMove(float(x) * sx, float(y) * sy))
 
-    def on_framebuffer(_w, width, height):
-        if width > 0 and height > 0:  # 0 x 0 while minimised: keep the last size
+    def on_framebuffer(w, width, height):
+        if width > 0 and height > 0:  # 0 x 0 while minimised: keep the last size (and scale)
+            scale[0] = cursor_scale(w)
             app.resize((int(width), int(height)))
 
     glfw.set_cursor_pos_callback(window, on_cursor)

@@ -11,12 +11,8 @@ from arboretum_client.net import JobStatus
 from arboretum_client.tools.state import REFINEMENT, ClientState
 
 from . import library_panel, refine_panel, status_bar
-from .widgets import Canvas
+from .widgets import PANEL_W, PANEL_X, Canvas
 
-PANEL_W = 250
-"""Width of the side panel in pixels when the output is wide enough."""
-PANEL_X = 10
-"""The panel's left (and top) margin."""
 MIN_PANEL = 150
 """Narrower than this (or an output less than ``MIN_PANEL`` pixels high) and there is no side panel."""
 

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 from arboretum_client.tools.state import ClientState
+from arboretum_client.ui_actions import TAGS
 
-from .widgets import DIM, LINE_H, TEXT, Canvas
+from .widgets import CHAR_W, DIM, LINE_H, PANEL_W, PANEL_X, TEXT, Canvas
 
-TAGS = ("straight", "curved", "dense", "sparse")
-WIDTH = 250
 MAX_ROWS = 12
 FIXED_H = 36 + 2 * LINE_H + 14 + 8 + LINE_H + 2 + 6 * (LINE_H + 4) + 6
 """Height of everything but the example rows (title, search, tags, tool buttons)."""
@@ -21,12 +20,12 @@ def fitting_rows(n: int, space: int) -> tuple[int, bool]:
     return rows, rows < n
 
 
-def draw(c: Canvas, s: ClientState, width: int = WIDTH, bottom: int | None = None) -> None:
-    """The panel ``width`` pixels wide from (10, 10), its example list cut to end above ``bottom``."""
-    x0, y0 = 10, 10
+def draw(c: Canvas, s: ClientState, width: int = PANEL_W, bottom: int | None = None) -> None:
+    """The panel ``width`` pixels wide from (``PANEL_X``, ``PANEL_X``), its example list cut to end above ``bottom``."""
+    x0 = y0 = PANEL_X
     rows, more = fitting_rows(len(s.library), (c.size[1] if bottom is None else bottom) - y0)
     height = FIXED_H + rows * (LINE_H + 2) + (LINE_H if more else 0)
-    chars = max((width - 28) // 7, 4)
+    chars = max((width - 28) // CHAR_W, 4)
     y = c.panel((x0, y0, x0 + width, y0 + height), "Library")
     query = s.query + ("|" if s.search_focus else "")
     c.button((x0 + 8, y, x0 + width - 8, y + LINE_H), f"search: {query or '(press /)'}"[:chars], "search:focus",
@@ -34,7 +33,7 @@ def draw(c: Canvas, s: ClientState, width: int = WIDTH, bottom: int | None = Non
     y += LINE_H + 6
     x = x0 + 8
     for tag in TAGS:
-        w = 8 + 7 * len(tag)
+        w = 8 + CHAR_W * len(tag)
         c.button((x, y, x + w, y + LINE_H), tag, f"tag:{tag}", s.tag_filter == tag)
         x += w + 4
     y += LINE_H + 8

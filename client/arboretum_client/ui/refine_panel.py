@@ -4,14 +4,12 @@ from __future__ import annotations
 
 from arboretum_client.tools.state import ClientState
 
-from .widgets import DIM, LINE_H, TEXT, Canvas
-
-WIDTH = 250
+from .widgets import DIM, LINE_H, PANEL_W, PANEL_X, TEXT, Canvas
 
 
-def draw(c: Canvas, s: ClientState, width: int = WIDTH, bottom: int | None = None) -> None:
-    """The panel ``width`` pixels wide from (10, 10) (``bottom`` is unused: its content is fixed)."""
-    x0, y0 = 10, 10
+def draw(c: Canvas, s: ClientState, width: int = PANEL_W, bottom: int | None = None) -> None:
+    """The panel ``width`` pixels wide from (``PANEL_X``, ``PANEL_X``) (``bottom`` is unused: its content is fixed)."""
+    x0 = y0 = PANEL_X
     y = c.panel((x0, y0, x0 + width, y0 + 330), "Refinement")
     hbl = s.draft
     if hbl is None:

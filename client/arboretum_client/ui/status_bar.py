@@ -9,11 +9,9 @@ from __future__ import annotations
 from arboretum_client.net import JobStatus
 from arboretum_client.tools.state import ClientState
 
-from .widgets import DIM, LINE_H, TEXT, Canvas
+from .widgets import CHAR_W, DIM, LINE_H, TEXT, Canvas
 
 HEIGHT = 26
-CHAR_W = 7
-"""Pixels per character of the 13 px default font (an upper bound, for cutting text to fit)."""
 BAR_X0, BAR_X1 = 230, 530
 """The progress bars' span on a wide output."""
 MIN_BAR = 24

@@ -23,6 +23,12 @@ ACCENT = (90, 160, 255, 255)
 BUTTON = (52, 60, 72, 230)
 BUTTON_ON = (70, 120, 200, 240)
 LINE_H = 18
+CHAR_W = 7
+"""Pixels per character of the 13 px default font (an upper bound, for sizing buttons and cutting text)."""
+PANEL_W = 250
+"""Width of the side panel in pixels when the output is wide enough."""
+PANEL_X = 10
+"""The side panel's left (and top) margin."""
 
 
 @lru_cache(maxsize=4)
@@ -65,7 +71,7 @@ class Canvas:
         for row in rows:
             x = x0 + 8
             for label, action, on in row:
-                w = 10 + 7 * len(label)
+                w = 10 + CHAR_W * len(label)
                 self.button((x, y, x + w, y + LINE_H), label, action, on)
                 x += w + 4
             y += LINE_H + 4
