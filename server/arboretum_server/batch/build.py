@@ -25,6 +25,7 @@ A scan that cannot be read, is empty or holds no tree is reported (``ScanRecord.
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import signal
 import threading
@@ -34,6 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from arboretum_library.checks import check_number
 from arboretum_library.errors import InputError
 from arboretum_library.progress import ProgressFn, no_progress
 
@@ -73,8 +75,7 @@ class BuildOptions:
     def __post_init__(self) -> None:
         if self.workers < 1:
             raise InputError(f"--workers must be at least 1, got {self.workers}")
-        if self.worker_timeout is not None and not self.worker_timeout > 0:
-            raise InputError(f"--worker-timeout must be a number of seconds > 0, got {self.worker_timeout}")
+        check_number(self.worker_timeout, "--worker-timeout", 0.0, math.inf, lo_open=True)
         if self.worker_timeout is not None and self.scheduler is None:
             raise InputError("--worker-timeout applies only with --scheduler (a local cluster always has "
                              "its --workers); leave it out or give --scheduler tcp://HOST:8786")
