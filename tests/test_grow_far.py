@@ -19,24 +19,13 @@ UTM = np.array([500000.0, 5400000.0, 0.0])
 QUANTUM = 2.0**-20
 
 
-def _mapped(hbl, f):
-    """``hbl`` with ``f`` applied to every coordinate array."""
-    from dataclasses import replace
-
-    q = lambda a: f(np.asarray(a, np.float64))  # noqa: E731
-    branches = tuple(replace(b, points=q(b.points)) for b in hbl.branches)
-    lobes = tuple(replace(lb, points=q(lb.points), hull_vertices=q(lb.hull_vertices), centre=q(lb.centre))
-                  for lb in hbl.lobes)
-    return replace(hbl, root=q(hbl.root), branches=branches, lobes=lobes, points=q(hbl.points))
-
-
 def _quantized(hbl):
     """``hbl`` with every coordinate on the 2^-20 m grid (so + UTM is exact)."""
-    return _mapped(hbl, lambda a: np.round(a / QUANTUM) * QUANTUM)
+    return hbl.map_positions(lambda a: np.round(a / QUANTUM) * QUANTUM)
 
 
 def translated(hbl, offset):
-    return _mapped(hbl, lambda a: a + offset)
+    return hbl.map_positions(lambda a: a + offset)
 
 
 @pytest.fixture(scope="module")
