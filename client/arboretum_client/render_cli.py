@@ -7,8 +7,10 @@ an HBL or Example record (.npz written by ``arboretum_library.codec.save_record`
 ``arboretum_library.export.gltf_read``; drawn with its textures, alpha modes and double-sidedness
 unless ``--no-textures``). Several inputs are drawn together. Rendering is headless (EGL).
 
-An .obj is read as Y up (as ``arboretum grow``, Blender and Maya write it) unless its header says Z up
-(``arboretum_library.export.obj.obj_up_axis``). Inputs far from the world origin (georeferenced scans
+``--up`` (auto, y, z; ``arboretum_library.export.mesh_up``) is the up axis of point cloud, .obj and .ply
+inputs; HBL records are Z up and .glb Y up. With ``auto`` an .obj is read by Arboretum's header, else
+as Y up (as Blender and Maya write it), and a .ply mesh as Z up, unless its vertices surely stand along
+the other axis; point clouds as ``arboretum scan --up auto`` reads them. Inputs far from the world origin (georeferenced scans
 in UTM coordinates) are drawn relative to the centre of all inputs, taken in float64 before the GPU's
 float32 (``scene_build.far_origin``).
 """
@@ -24,6 +26,7 @@ import numpy as np
 from arboretum_library.checks import check_input_file
 from arboretum_library.cli import add_json_flag, emit
 from arboretum_library.errors import InputError
+from arboretum_library.export.mesh_up import UP_CHOICES
 from arboretum_library.outputs import check_output
 
 VIEW_CHOICES = ("front", "side", "top", "iso")
@@ -35,6 +38,9 @@ def register(subparsers) -> None:
     p.add_argument("--out", required=True, help="PNG file to write (.png, in an existing folder)")
     p.add_argument("--view", choices=VIEW_CHOICES, default="iso", help="camera direction (default iso)")
     p.add_argument("--size", default="1280x720", help="image size WIDTHxHEIGHT (default 1280x720)")
+    p.add_argument("--up", choices=UP_CHOICES, default="auto",
+                   help="up axis of point cloud, .obj and .ply inputs: auto (default), y or z (records are "
+                        "Z up, .glb Y up)")
     p.add_argument("--points", action="store_true", help="also draw an HBL's source points by label")
     p.add_argument("--no-grid", action="store_true", help="leave out the ground grid")
     p.add_argument("--no-textures", action="store_true",
@@ -65,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     style = HBLStyle(show_points=args.points, grid=False)
     textures = not getattr(args, "no_textures", False)
-    loaded = [read_input(Path(p), style, textures) for p in args.inputs]
+    loaded = [read_input(Path(p), style, textures, getattr(args, "up", "auto")) for p in args.inputs]
     origin = far_origin(np.concatenate([corners for corners, _ in loaded]))
     scene = combine(*(build(origin) for _, build in loaded), grid=not args.no_grid)
     with OffscreenRenderer(size) as r:
@@ -89,9 +95,13 @@ def load_scene(path: Path, style, textures: bool = True):
     return build(far_origin(corners))
 
 
-def read_input(path: Path, style, textures: bool = True):
+def read_input(path: Path, style, textures: bool = True, up: str = "auto"):
     """(corners, build) for one input file: its (2, 3) float64 world bounding box, and a function taking
-    an origin (3,) to the input's Scene relative to it (see ``load_scene``)."""
+    an origin (3,) to the input's Scene relative to it (see ``load_scene``). ``up``: the up axis of a
+    point cloud, .obj or .ply (``--up``)."""
+    from arboretum_library.export.mesh_up import mesh_up_axis
+    from arboretum_library.geometry import yup_to_zup
+
     from .scene_build import glb_scene, hbl_points, hbl_scene, mesh_scene, points_scene
 
     check_input_file(str(path), "INPUT")
@@ -99,6 +109,7 @@ def read_input(path: Path, style, textures: bool = True):
     if ext == ".glb":
         from arboretum_library.export.gltf_read import read_glb
 
+        mesh_up_axis(path, np.zeros((0, 3)), up)  # --up z is refused: glTF is Y up
         meshes = read_glb(path)
         return _glb_corners(meshes), lambda o: glb_scene(meshes, False, textures, str(path), origin=o)
     if ext == ".gltf":
@@ -107,10 +118,12 @@ def read_input(path: Path, style, textures: bool = True):
         hbl = load_hbl(path)
         return _corners(hbl_points(hbl)), lambda o: hbl_scene(hbl, style, origin=o)
     if ext in (".obj", ".ply"):
-        verts, faces = read_obj(path) if ext == ".obj" else read_ply(path)
+        verts, faces = read_obj(path, up) if ext == ".obj" else read_ply(path)
         if len(faces):
+            if ext == ".ply" and mesh_up_axis(path, verts, up) == "y":
+                verts = yup_to_zup(verts)
             return _corners(verts), lambda o: mesh_scene(verts, faces, grid=False, origin=o)
-    points, colors = read_point_cloud(path)
+    points, colors = read_point_cloud(path, up)
     return _corners(points), lambda o: points_scene(points, colors, grid=False, origin=o)
 
 
@@ -143,11 +156,12 @@ def load_hbl(path: Path):
     return codec.load_record(path, types[kind])
 
 
-def read_point_cloud(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
-    """Points (N, 3) and colours (N, 3) or None (from the file's colours, else its wood/leaf labels)."""
-    from arboretum_library.pointio import read_points
+def read_point_cloud(path: Path, up: str = "auto") -> tuple[np.ndarray, np.ndarray | None]:
+    """Points (N, 3) Z up (``up``: the file's, as ``pointio.ReadOptions.up``) and colours (N, 3) or None
+    (from the file's colours, else its wood/leaf labels)."""
+    from arboretum_library.pointio import ReadOptions, read_points
 
-    cloud = read_points(path)
+    cloud = read_points(path, ReadOptions(up=up))
     colors = cloud.colors
     if colors is None and cloud.labels is not None:
         from .scene_build import LEAF_COLOR, WOOD_COLOR
@@ -157,7 +171,8 @@ def read_point_cloud(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
 
 
 def read_ply(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (V, 3) and triangles (F, 3) of a .ply (polygons fan-triangulated; F = 0 for clouds)."""
+    """Vertices (V, 3) as stored and triangles (F, 3) of a .ply (polygons fan-triangulated; F = 0 for
+    clouds)."""
     from plyfile import PlyData
 
     try:
@@ -173,10 +188,11 @@ def read_ply(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return verts, _triangulate([np.asarray(f, np.int64) for f in ply["face"].data[prop]], len(verts), path)
 
 
-def read_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (V, 3) float64 Z up and triangles (F, 3) of a Wavefront .obj (v and f lines only); Y up
-    unless its header says Z up (``obj_up_axis``)."""
-    from arboretum_library.export.obj import obj_up_axis
+def read_obj(path: Path, up: str = "auto") -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 3) float64 Z up and triangles (F, 3) of a Wavefront .obj (v and f lines only); its up
+    axis by ``up`` (``export.mesh_up.mesh_up_axis``: by default Arboretum's header, else Y up unless
+    the vertices surely stand along Z)."""
+    from arboretum_library.export.mesh_up import mesh_up_axis
     from arboretum_library.geometry import yup_to_zup
 
     verts, polys = [], []
@@ -191,7 +207,8 @@ def read_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
     nv = len(verts)
     polys = [np.where(p < 0, nv + p, p - 1) for p in polys]  # 1-based, negatives count from the end
     verts = np.asarray(verts, np.float64)
-    return (yup_to_zup(verts) if obj_up_axis(path) == "y" else verts), _triangulate(polys, nv, path)
+    flat = _triangulate(polys, nv, path)
+    return (yup_to_zup(verts) if mesh_up_axis(path, verts, up) == "y" else verts), flat
 
 
 def _triangulate(polys: list[np.ndarray], n_verts: int, path: Path) -> np.ndarray:

@@ -96,17 +96,23 @@ def mtl_text(materials: Sequence[Material], stem: str = "") -> str:
 
 
 def obj_up_axis(path: str | os.PathLike) -> str:
-    """'y' or 'z': the up axis of the OBJ at ``path``.
+    """'y' or 'z': the up axis of the OBJ at ``path`` by its header (``obj_header_axis``), else Y up, as
+    Blender, Maya and most OBJ exporters write it (``export.mesh_up.mesh_up_axis`` also looks at the
+    vertices of a file without our header)."""
+    return obj_header_axis(path) or "y"
 
-    Only Arboretum's own first line decides: ``# arboretum OBJ (Y up`` / ``(Z up`` (this writer and
+
+def obj_header_axis(path: str | os.PathLike) -> str | None:
+    """'y' or 'z' when the OBJ at ``path`` starts with Arboretum's header, else None.
+
+    Only Arboretum's own first line counts: ``# arboretum OBJ (Y up`` / ``(Z up`` (this writer and
     ``save_obj``), and ``# Arboretum module`` (module files from ``save_obj`` before it wrote that line,
-    Z up). Anything else is Y up, as Blender, Maya and most OBJ exporters write it, whatever its comments
-    say ("axes converted from Z-up to Y-up" is no header of ours)."""
+    Z up), whatever other files' comments say ("axes converted from Z-up to Y-up" is no header of ours)."""
     with open(path, encoding="utf-8", errors="replace") as f:
         first = f.readline().strip()
     if (found := _HEADER.match(first)) is not None:
         return found.group(1).lower()
-    return "z" if first.startswith("# Arboretum module") else "y"
+    return "z" if first.startswith("# Arboretum module") else None
 
 
 def _ours(path: Path, data: bytes, owned: set[str]) -> bool:

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from arboretum_library.cli import add_json_flag, emit
 from arboretum_library.errors import InputError
+from arboretum_library.export.mesh_up import UP_CHOICES
 from arboretum_library.outputs import check_output
 
 CROWN_FORMATS = (".obj", ".ply", ".glb", ".gltf")
@@ -26,11 +27,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--crown", metavar="MESH", help="closed crown mesh in metres: .obj (Y up unless its "
-                     "header says Z up), .ply (Z up), .glb/.gltf (Y up)")
+                     "header says Z up), .ply (Z up), .glb/.gltf (Y up); see --up")
     src.add_argument("--assembly", metavar="A", help="record .npz (HBL, or Assembly with --library): the "
                      "union of its lobe hulls is the crown, its main branch base the trunk position")
     src.add_argument("--tree", metavar="TREE", help="record .npz (HBL, or Assembly with --library): grown "
                      "with default options, then converted into --types module types")
+    p.add_argument("--up", choices=UP_CHOICES, default="auto",
+                   help="up axis of the --crown mesh: auto (default: the format's usual axis above, unless "
+                        "its vertices surely stand along the other), y or z")
     p.add_argument("--modules", metavar="DIR", default=None,
                    help="module folder (.obj/.glb; default assets/modules/default)")
     p.add_argument("--library", metavar="LIB", default=None, help="example library for an Assembly record")
@@ -44,10 +48,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _crown_mesh(path: str):
+def _crown_mesh(path: str, up: str = "auto"):
     from .meshio import load_mesh
 
-    return load_mesh(path, "--crown")
+    return load_mesh(path, "--crown", up)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -126,7 +130,7 @@ def _grown(args: argparse.Namespace):
 
     modules = _module_set(args.modules, args.types)
     if args.crown:
-        meshes = [_crown_mesh(args.crown)]
+        meshes = [_crown_mesh(args.crown, args.up)]
         root = crown_root(meshes[0][0])
     else:
         meshes, root = _assembly_crown(args.assembly, args.library)

@@ -9,17 +9,19 @@ import numpy as np
 
 from arboretum_library.checks import check_input_file
 from arboretum_library.errors import InputError
-from arboretum_library.export.obj import obj_header, obj_up_axis
+from arboretum_library.export.mesh_up import mesh_up_axis
+from arboretum_library.export.obj import obj_header
 from arboretum_library.geometry import yup_to_zup
 
 
-def load_mesh(path: str | Path, what: str = "module mesh") -> tuple[np.ndarray, np.ndarray]:
+def load_mesh(path: str | Path, what: str = "module mesh", up: str = "auto") -> tuple[np.ndarray, np.ndarray]:
     """Vertices (V, 3) float64 Z up and faces (F, 3) int32 of the mesh in ``path`` (.obj, .glb, .gltf,
-    and .ply, which is read Z up as we write it); errors name it as ``what`` (e.g. ``--crown``).
+    .ply); errors name it as ``what`` (e.g. ``--crown``).
 
-    glTF is Y up and converted. OBJ is Y up and converted too (as ``export.obj.write_obj``, Blender and
-    Maya write it) unless its header says Z up (``arboretum_library.export.obj.obj_up_axis``), as
-    ``save_obj``'s module files do. Coincident vertices are merged.
+    ``up`` ('auto', 'y', 'z'; ``arboretum_library.export.mesh_up.mesh_up_axis``): glTF is Y up; OBJ is
+    read by its Arboretum header (``save_obj``'s module files say Z up), else Y up as Blender and Maya
+    write it, and PLY Z up, unless the vertices surely stand along the other axis. Coincident vertices
+    are merged.
     """
     import trimesh
 
@@ -38,9 +40,7 @@ def load_mesh(path: str | Path, what: str = "module mesh") -> tuple[np.ndarray, 
     faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int32).reshape(-1, 3)
     if len(faces) == 0:
         raise InputError(f"{what} {path}: has no triangles (a point cloud? give a closed mesh)")
-    if suffix == ".ply":
-        return vertices, faces
-    if suffix != ".obj" or obj_up_axis(path) == "y":
+    if mesh_up_axis(path, vertices, up, what) == "y":
         vertices = yup_to_zup(vertices)
     return vertices, faces
 

@@ -1,0 +1,123 @@
+"""``--up`` for mesh inputs (``render``, ``modules --crown``): Arboretum's header, else the format's
+usual axis unless the vertices surely stand along the other (a tree exported Z up without our header
+used to lie on its side)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from arboretum_client.render_cli import read_input, read_obj
+from arboretum_library.cli import main
+from arboretum_library.errors import InputError
+from arboretum_library.export.mesh_up import mesh_up_axis
+from arboretum_library.geometry import zup_to_yup
+from arboretum_server.modules.meshio import load_mesh
+
+
+def _tree_zup() -> trimesh.Trimesh:
+    """A 6 m tree, Z up: a trunk 0.3 m across up to 4 m, a crown 3 m across centred at 4.5 m."""
+    trunk = trimesh.creation.cylinder(radius=0.15, height=4.0)
+    trunk.apply_translation([0, 0, 2.0])
+    crown = trimesh.creation.icosphere(subdivisions=3, radius=1.5)
+    crown.apply_translation([0, 0, 4.5])
+    return trimesh.util.concatenate([trunk, crown])
+
+
+def _write_obj(path, verts, faces, header="# exported by SomeTool 2.1"):
+    lines = [header] + [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in verts]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _height_axis(verts) -> int:
+    return int(np.argmax(np.ptp(verts, axis=0)))
+
+
+@pytest.fixture
+def files(tmp_path):
+    tree = _tree_zup()
+    v, f = np.asarray(tree.vertices), np.asarray(tree.faces)
+    out = {
+        "obj_z": _write_obj(tmp_path / "zup.obj", v, f),
+        "obj_y": _write_obj(tmp_path / "yup.obj", zup_to_yup(v), f, "# Blender 4.1"),
+        "ply_z": tmp_path / "zup.ply",
+        "ply_y": tmp_path / "yup.ply",
+    }
+    trimesh.Trimesh(v, f, process=False).export(out["ply_z"])
+    trimesh.Trimesh(zup_to_yup(v), f, process=False).export(out["ply_y"])
+    return out
+
+
+@pytest.mark.parametrize("name", ["obj_z", "obj_y", "ply_z", "ply_y"])
+def test_a_tree_is_read_upright_whichever_axis_its_file_has(files, name):
+    path = files[name]
+    assert mesh_up_axis(path, _raw(path)) == name[-1]
+    v, _ = load_mesh(path, "--crown")
+    assert _height_axis(v) == 2 and v[:, 2].min() == pytest.approx(0.0, abs=1e-5)  # standing on z = 0
+    assert v[:, 2].max() == pytest.approx(6.0, abs=1e-3)
+    corners, _ = read_input(path, None)
+    assert corners[1, 2] - corners[0, 2] == pytest.approx(6.0, abs=1e-3)
+
+
+def _raw(path):
+    m = trimesh.load(path, force="mesh", process=False)
+    return np.asarray(m.vertices)
+
+
+def test_an_explicit_up_wins_over_the_guess(files):
+    v, _ = read_obj(files["obj_z"], "y")  # told Y up: the tree lies along -Y
+    assert _height_axis(v) == 1
+    v, _ = load_mesh(files["obj_y"], "--crown", "z")
+    assert _height_axis(v) == 1
+
+
+def test_an_unsure_guess_keeps_the_formats_axis(tmp_path):
+    # a round crown is no more upright along Z than along Y: an OBJ stays Y up, a PLY Z up
+    ball = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    path = _write_obj(tmp_path / "ball.obj", ball.vertices, ball.faces)
+    assert mesh_up_axis(path, np.asarray(ball.vertices)) == "y"
+    ply = tmp_path / "ball.ply"
+    ball.export(ply)
+    assert mesh_up_axis(ply, np.asarray(ball.vertices)) == "z"
+
+
+def test_arboretums_header_decides_even_against_the_shape(files, tmp_path):
+    tree = _tree_zup()
+    path = _write_obj(tmp_path / "ours.obj", zup_to_yup(tree.vertices), tree.faces,
+                      "# arboretum OBJ (Y up, metres)")
+    assert mesh_up_axis(path, np.asarray(tree.vertices)) == "y"  # vertices as if Z up: the header wins
+
+
+def test_gltf_is_y_up_and_up_z_is_refused(tmp_path, capsys):
+    glb = tmp_path / "t.glb"
+    _tree_zup().export(glb)
+    assert mesh_up_axis(glb, np.zeros((0, 3))) == "y" and mesh_up_axis(glb, np.zeros((0, 3)), "y") == "y"
+    with pytest.raises(InputError, match=r"t\.glb: glTF is Y up by definition"):
+        mesh_up_axis(glb, np.zeros((0, 3)), "z")
+    code = main(["render", str(glb), "--out", str(tmp_path / "x.png"), "--up", "z"])
+    err = capsys.readouterr().err
+    assert code == 2 and "glTF is Y up" in err and "Traceback" not in err
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_modules_passes_up_to_its_crown(files, monkeypatch, tmp_path, capsys):
+    from arboretum_server.modules import meshio
+
+    seen = []
+
+    real = meshio.load_mesh
+
+    def stop(path, what="module mesh", up="auto"):
+        if what != "--crown":
+            return real(path, what, up)  # the bundled module meshes
+        seen.append(up)
+        raise InputError("stop here")
+
+    monkeypatch.setattr(meshio, "load_mesh", stop)
+    for up in ("auto", "z"):
+        argv = ["modules", "--crown", str(files["obj_z"]), "--out", str(tmp_path / "m.glb")]
+        assert main(argv + (["--up", up] if up != "auto" else [])) == 2
+    assert seen == ["auto", "z"] and "stop here" in capsys.readouterr().err
