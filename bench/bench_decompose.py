@@ -35,12 +35,37 @@ def _decompose_rows() -> list[Row]:
     pts200, _ = toy_scan(truth, n=200_000, seed=2)
     t = median_time(lambda: decompose(pts200, DecomposeOptions()), runs=3)
     rows.append(Row("decompose 200k points end to end (toy tree)", t, target=3.0, runs=3))
+    rows.append(_full_resolution_row())
     scan = [p for p in sample_scans() if p.name.startswith("07_")]
     if scan:
         pts = np.loadtxt(scan[0])
         t = median_time(lambda: decompose(pts, DecomposeOptions()), runs=3)
         rows.append(Row("decompose scan 07 (64k -> 12k points)", t, target=1.0, runs=3))
     return rows
+
+
+def _full_resolution_row() -> Row:
+    """``decompose --points 0`` on 100,000 points against the same run as the code before session 10:
+    every lonely graph component bridged through a KD-tree of all other points (``graph.SMALL_COMPONENT``
+    back at 64) and every lobe point tetrahedralised (``lobes.DENSE`` unbounded)."""
+    from dataclasses import replace
+
+    from arboretum_server.decompose import graph, lobes
+    from arboretum_server.decompose.options import DecomposeOptions
+    from arboretum_server.decompose.pipeline import decompose
+    from arboretum_server.decompose.toytree import toy_scan, toy_truth
+
+    pts, _ = toy_scan(toy_truth(), n=100_000, seed=2)
+    o = replace(DecomposeOptions(), points=0)
+    fast = median_time(lambda: decompose(pts, o), runs=3, warmup=0)
+    saved = graph.SMALL_COMPONENT, lobes.DENSE
+    graph.SMALL_COMPONENT, lobes.DENSE = 64, 1 << 62
+    try:
+        base = median_time(lambda: decompose(pts, o), runs=3, warmup=0)
+    finally:
+        graph.SMALL_COMPONENT, lobes.DENSE = saved
+    return Row("decompose 100k points at full resolution (--points 0)", fast, runs=3,
+               baseline="bridging and lobes as before session 10", ratio=fast / base)
 
 
 def _refine_rows() -> list[Row]:
