@@ -6,7 +6,9 @@ arguments, before it reads or computes anything. It refuses:
 - a path that is an existing folder, or whose folder is missing, is a file, or cannot be written;
 - a path that is the same file as one of the command's inputs (``render h.npz --out h.npz`` turned
   the record into a PNG) or as another of its outputs (``grow --out m.ply --skeleton m.ply``);
-- a suffix the command does not write, when it names the suffixes it does.
+- a suffix the command does not write, when it names the suffixes it does;
+- a path inside a library the command uses (``libraries``): ``assemble --out LIB/examples/X/arrays.npz``
+  replaced an example's arrays with a session file.
 
 Writers still write to a temporary file and rename it (``codec.save_record``); this only moves the
 errors a user can cause to the start and names the path the user gave, not the temporary file.
@@ -24,11 +26,13 @@ PathLike = str | os.PathLike
 
 
 def check_output(path: PathLike, what: str = "--out", *, inputs: Iterable[PathLike | None] = (),
-                 outputs: Iterable[PathLike | None] = (), suffixes: Iterable[str] = ()) -> Path:
+                 outputs: Iterable[PathLike | None] = (), suffixes: Iterable[str] = (),
+                 libraries: Iterable[PathLike | None] = ()) -> Path:
     """``path`` as a Path once it can be written as a new or replaced file; ``InputError`` naming
     ``what`` (the option, e.g. ``--out``) and ``path`` otherwise. ``inputs`` and ``outputs``: the
     command's other files (None entries are skipped); ``suffixes``: the lower-case suffixes it writes
-    (e.g. ``(".glb", ".gltf")``), any when empty."""
+    (e.g. ``(".glb", ".gltf")``), any when empty; ``libraries``: library folders the command reads or
+    writes, inside which nothing else may be written."""
     p = Path(path)
     if str(path) == "" or p.name in ("", ".", ".."):
         raise InputError(f"{what} {str(path)!r}: give a file name")
@@ -44,6 +48,10 @@ def check_output(path: PathLike, what: str = "--out", *, inputs: Iterable[PathLi
         raise InputError(f"{what} {p}: {folder} is a file, not a folder")
     if not os.access(folder, os.W_OK | os.X_OK) or (p.exists() and not os.access(p, os.W_OK)):
         raise InputError(f"{what} {p}: cannot write there (permission denied)")
+    for lib in libraries:
+        if lib is not None and inside(p, lib):
+            raise InputError(f"{what} {p}: lies inside the library {lib}, whose files only the library "
+                             "writes; choose a path outside it")
     for kind, others in (("the input", inputs), ("also another output", outputs)):
         for other in others:
             if other is not None and same_file(p, other):
@@ -61,3 +69,11 @@ def same_file(a: PathLike, b: PathLike) -> bool:
     except OSError:
         pass
     return os.path.abspath(a) == os.path.abspath(b)
+
+
+def inside(path: PathLike, folder: PathLike) -> bool:
+    """Whether ``path`` lies in ``folder`` or below it (links resolved, the path need not exist)."""
+    try:
+        return Path(path).resolve().is_relative_to(Path(folder).resolve())
+    except (OSError, RuntimeError):  # a link loop
+        return False

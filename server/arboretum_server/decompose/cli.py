@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     options = _options(args)
     if args.save_hbl:  # before the scan is read; never the scan itself
-        check_output(args.save_hbl, "--save-hbl", inputs=[args.scan], suffixes=(".npz",))
+        check_output(args.save_hbl, "--save-hbl", inputs=[args.scan], suffixes=(".npz",), libraries=[args.library])
     t0 = time.perf_counter()
     cloud = read_points(args.scan, ReadOptions(up=args.up))
     t_read = time.perf_counter() - t0

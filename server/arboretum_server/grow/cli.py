@@ -63,10 +63,11 @@ def _check_args(args: argparse.Namespace) -> tuple[Path, Path | None]:
     skel = Path(args.skeleton) if args.skeleton else None
     if skel is not None and skel.suffix.lower() not in SKELETON_FORMATS:
         raise InputError(f"--skeleton {skel}: unknown format {skel.suffix!r}; use .json or .ply")
-    check_output(out, "--out", inputs=[args.hbl], suffixes=MESH_FORMATS)
+    check_output(out, "--out", inputs=[args.hbl], suffixes=MESH_FORMATS, libraries=[args.library])
     check_obj_sidecars(out)
     if skel is not None:
-        check_output(skel, "--skeleton", inputs=[args.hbl], outputs=[out], suffixes=SKELETON_FORMATS)
+        check_output(skel, "--skeleton", inputs=[args.hbl], outputs=[out], suffixes=SKELETON_FORMATS,
+                     libraries=[args.library])
     check_seed(args.seed)
     check_lod(args.lod, args.sides)
     check_number(args.density, "--density", 0.0, MAX_DENSITY, lo_open=True)

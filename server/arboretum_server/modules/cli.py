@@ -88,7 +88,7 @@ def _check_args(args: argparse.Namespace) -> str:
     if flag == "--crown" and src.suffix.lower() not in CROWN_FORMATS:
         raise InputError(f"--crown {src}: unsupported format {src.suffix!r} (use {', '.join(CROWN_FORMATS)})")
     check_input_file(source, flag)
-    check_output(args.out, "--out", inputs=[source])
+    check_output(args.out, "--out", inputs=[source], libraries=[args.library])
     suffix = check_format(args.out, args.plain_nodes)
     if flag == "--tree" and args.modules is not None:
         raise InputError("--modules applies to --crown and --assembly only (--tree makes its own module "
