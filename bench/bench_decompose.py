@@ -46,8 +46,8 @@ def _decompose_rows() -> list[Row]:
 
 def _full_resolution_row() -> Row:
     """``decompose --points 0`` on 100,000 points against the same run as the code before session 10:
-    every lonely graph component bridged through a KD-tree of all other points (``graph.SMALL_COMPONENT``
-    back at 64) and every lobe point tetrahedralised (``lobes.DENSE`` unbounded)."""
+    every lonely graph component bridged through a KD-tree of all other points
+    (``graph.nearest_pair_reference``) and every lobe point tetrahedralised (``lobes.DENSE`` unbounded)."""
     from dataclasses import replace
 
     from arboretum_server.decompose import graph, lobes
@@ -58,12 +58,12 @@ def _full_resolution_row() -> Row:
     pts, _ = toy_scan(toy_truth(), n=100_000, seed=2)
     o = replace(DecomposeOptions(), points=0)
     fast = median_time(lambda: decompose(pts, o), runs=3, warmup=0)
-    saved = graph.SMALL_COMPONENT, lobes.DENSE
-    graph.SMALL_COMPONENT, lobes.DENSE = 64, 1 << 62
+    saved = graph._nearest_pair, lobes.DENSE
+    graph._nearest_pair, lobes.DENSE = graph.nearest_pair_reference, 1 << 62
     try:
         base = median_time(lambda: decompose(pts, o), runs=3, warmup=0)
     finally:
-        graph.SMALL_COMPONENT, lobes.DENSE = saved
+        graph._nearest_pair, lobes.DENSE = saved
     return Row("decompose 100k points at full resolution (--points 0)", fast, runs=3,
                baseline="bridging and lobes as before session 10", ratio=fast / base)
 

@@ -16,11 +16,6 @@ from scipy.spatial import cKDTree
 
 CANDIDATES = 16
 """Neighbours queried per point for bridging candidates (beyond the K graph neighbours)."""
-SMALL_COMPONENT = 2048
-"""A component this small with no candidate edge finds its nearest outsider among its points' own
-nearest neighbours (``_nearest_pair``); a larger one queries a KD-tree of every other point (60 ms to
-build on 200,000 points). A full-resolution scan (``--points 0``) splits into hundreds of components
-of 100-300 points under K = 5."""
 SHORTCUT_REACH = 3.0
 """``gap_graph``: components whose boxes come within this many query radii of each other are joined."""
 SHORTCUT_COST = 10.0
@@ -158,28 +153,39 @@ def _isolated_edges(points, tree, lab, ncomp, ca, cb, cw):
 
 def _nearest_pair(points, tree, inside, lab, c):
     """The shortest edge (a, b, w) (arrays of one) from the points ``inside`` (component ``c`` of the
-    labels ``lab``) to any other point."""
-    if len(inside) > SMALL_COMPONENT:
+    labels ``lab``) to any other point.
+
+    An upper bound first: the nearest outsider of the component's six extreme points (each point's
+    len(inside) + 1 nearest neighbours hold one). The true pair's outsider then lies within that bound
+    of the component's bounding ball, so the outsiders in the ball, each asked for its nearest insider
+    (a KD-tree of the component), give the exact edge without a tree of every other point.
+    """
+    own = points[inside]
+    if 2 * len(inside) > len(points):  # most of the cloud: ask each outsider for its nearest insider
         outside = np.flatnonzero(lab != c)
-        small, big = (inside, outside) if len(inside) <= len(outside) else (outside, inside)
-        d, j = cKDTree(points[big]).query(points[small])
+        d, k = cKDTree(own).query(points[outside])
         r = int(np.argmin(d))
-        return small[r : r + 1], big[j[r : r + 1]], d[r : r + 1]
-    # Each point's nearest outsider is the first outsider among its nearest neighbours; a point whose
-    # k nearest are all insiders has none closer than its k-th, so it is asked again with 4k only
-    # while that k-th is closer than the best edge yet. len(inside) + 1 neighbours always hold one.
-    best, todo, k = (np.inf, -1, -1), inside, 2 * CANDIDATES
-    while len(todo):
-        k = min(k, len(inside) + 1, len(points))
-        d, j = tree.query(points[todo], k=k)
-        out = lab[j] != c
-        dd = np.where(out, d, np.inf)
-        r, q = np.unravel_index(int(np.argmin(dd)), dd.shape)
-        if dd[r, q] < best[0]:
-            best = (dd[r, q], todo[r], j[r, q])
-        todo = todo[~out.any(axis=1) & (d[:, -1] < best[0])]
-        k *= 4
-    return np.array([best[1]]), np.array([best[2]]), np.array([best[0]])
+        return inside[k[r : r + 1]], outside[r : r + 1], d[r : r + 1]
+    ends = np.unique(np.r_[own.argmin(axis=0), own.argmax(axis=0)])
+    d, j = tree.query(own[ends], k=min(len(points), len(inside) + 1))
+    bound = float(np.where(lab[j] != c, d, np.inf).min())
+    lo, hi = own.min(axis=0), own.max(axis=0)
+    near = np.asarray(tree.query_ball_point((lo + hi) / 2, float(np.linalg.norm(hi - lo)) / 2 + bound), np.int64)
+    near = near[lab[near] != c]
+    d, k = cKDTree(own).query(points[near])
+    r = int(np.argmin(d))
+    return inside[k[r : r + 1]], near[r : r + 1], d[r : r + 1]
+
+
+def nearest_pair_reference(points, tree, inside, lab, c):
+    """``_nearest_pair`` as it was before session 10: a KD-tree of every other point, built per
+    component (the benchmark's baseline and the tests' reference)."""
+    outside = np.flatnonzero(lab != c)
+    small, big = (inside, outside) if len(inside) <= len(outside) else (outside, inside)
+    d, j = cKDTree(points[big]).query(points[small])
+    r = int(np.argmin(d))
+    a, b = small[r : r + 1], big[j[r : r + 1]]
+    return (a, b, d[r : r + 1]) if small is inside else (b, a, d[r : r + 1])
 
 
 def shortest_paths(adj: csr_matrix, root: int) -> tuple[np.ndarray, np.ndarray]:
