@@ -324,7 +324,7 @@ def test_build_exit_status_and_no_empty_library_left(tmp_path, capsys):
             "--points", "1500"]
     assert main(args) == 1
     out = capsys.readouterr().out
-    assert "1 scans added" in out and "1 failed" in out
+    assert "1 scan added" in out and "1 failed" in out
     with Library.open(lib2, readonly=True) as L:
         assert len(L) >= 1
     assert main(args[:3] + args[4:]) == 0  # the good scan alone: already there, nothing failed

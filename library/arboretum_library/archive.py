@@ -4,8 +4,13 @@ Members (no directories, links or anything else)::
 
     examples/<id>/meta.json      byte for byte the library's files
     examples/<id>/arrays.npz
-    manifest.json                {"format": "arboretum-library-archive", "schema": 1, "created": ...,
+    manifest.json                {"format": "arboretum-library-archive", "schema": 1,
                                   "examples": [{"id": ..., "arrays_sha256": ...}, ...]}
+
+An export is reproducible: the same examples give the same bytes. Members come in id order, each
+example's two files carry the example's own ``created`` time as their mtime (the manifest the latest
+of them), and the manifest holds no clock time (older archives have a ``created`` field there, which
+import never read and still accepts).
 
 Importing reads every member (``tarfile`` also accepts .tar.gz/.tar.bz2/.tar.xz), refuses any name
 that is not one of the above (so nothing can land outside the library: no '..', no absolute paths, no
@@ -15,6 +20,7 @@ links), and validates every example before adding any. A corrupt or foreign arch
 
 from __future__ import annotations
 
+import calendar
 import dataclasses
 import io
 import json
@@ -29,6 +35,7 @@ from .catalog import SCHEMA_VERSION
 from .errors import InputError, StoreError, ValidationError
 from .folders import ARRAYS, META, decode, encode, valid_id
 from .model import Example
+from .outputs import check_output
 from .progress import ProgressFn, no_progress
 
 ARCHIVE_FORMAT = "arboretum-library-archive"
@@ -61,45 +68,73 @@ class CheckedArchive:
 
 
 def export_archive(lib, path: Path, progress: ProgressFn = no_progress) -> dict:
-    """Write every example of ``lib`` (a ``Library``) to the tar ``path`` (temp file, then rename)."""
+    """Write every example of ``lib`` (a ``Library``) to the tar ``path`` (temp file, then rename).
+
+    ``path`` is checked first (``outputs.check_output``: not a folder, its folder exists and can be
+    written, not inside the library): an ``InputError`` names it, not the temporary file."""
+    path = check_output(path, "ARCHIVE", libraries=[lib.root])
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    listed = []
-    ids = lib.ids()
     try:
         with tarfile.open(tmp, "w", format=tarfile.PAX_FORMAT) as tf:
-            for i, id_ in enumerate(ids):
-                folder = lib.root / "examples" / id_
-                try:
-                    meta, npz = (folder / META).read_bytes(), (folder / ARRAYS).read_bytes()
-                except FileNotFoundError:
-                    continue  # deleted by another process meanwhile
-                try:
-                    head = decode(meta, npz, str(folder))[1]
-                except ValidationError as exc:
-                    raise StoreError(str(exc)) from None
-                _add_member(tf, f"examples/{id_}/{META}", meta)
-                _add_member(tf, f"examples/{id_}/{ARRAYS}", npz)
-                listed.append({"id": id_, "arrays_sha256": head["arrays_sha256"]})
-                progress(i + 1, len(ids), "exporting")
+            listed = _write_examples(tf, lib, progress)
             manifest = {"format": ARCHIVE_FORMAT, "schema": SCHEMA_VERSION,
-                        "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "examples": listed}
-            _add_member(tf, MANIFEST, json.dumps(manifest, indent=1).encode())
+                        "examples": [{"id": e["id"], "arrays_sha256": e["arrays_sha256"]} for e in listed]}
+            _add_member(tf, MANIFEST, json.dumps(manifest, indent=1).encode(),
+                        max((e["mtime"] for e in listed), default=0))
         os.replace(tmp, path)
+    except OSError as exc:
+        if exc.filename is None or Path(exc.filename) not in (tmp, path):
+            raise
+        raise InputError(f"ARCHIVE {path}: cannot write it ({exc.strerror or exc})") from None
     finally:
         tmp.unlink(missing_ok=True)
     return {"archive": str(path), "examples": len(listed), "size_bytes": path.stat().st_size}
 
 
-def _add_member(tf: tarfile.TarFile, name: str, data: bytes) -> None:
+def _write_examples(tf: tarfile.TarFile, lib, progress: ProgressFn) -> list[dict]:
+    """Add every example's two files to ``tf`` in id order; their manifest entries (with ``mtime``)."""
+    listed = []
+    ids = sorted(lib.ids())
+    for i, id_ in enumerate(ids):
+        folder = lib.root / "examples" / id_
+        try:
+            meta, npz = (folder / META).read_bytes(), (folder / ARRAYS).read_bytes()
+        except FileNotFoundError:
+            continue  # deleted by another process meanwhile
+        try:
+            head = decode(meta, npz, str(folder))[1]
+        except ValidationError as exc:
+            raise StoreError(str(exc)) from None
+        mtime = _epoch(head["created"])
+        _add_member(tf, f"examples/{id_}/{META}", meta, mtime)
+        _add_member(tf, f"examples/{id_}/{ARRAYS}", npz, mtime)
+        listed.append({"id": id_, "arrays_sha256": head["arrays_sha256"], "mtime": mtime})
+        progress(i + 1, len(ids), "exporting")
+    return listed
+
+
+def _epoch(created: object) -> int:
+    """Seconds since 1970 of an example's ``created`` time ("2026-11-22T05:06:39Z"); 0 when it is not
+    one (a member's mtime is only for people listing the archive)."""
+    try:
+        return max(0, calendar.timegm(time.strptime(str(created), "%Y-%m-%dT%H:%M:%SZ")))
+    except (ValueError, OverflowError):
+        return 0
+
+
+def _add_member(tf: tarfile.TarFile, name: str, data: bytes, mtime: int) -> None:
     info = tarfile.TarInfo(name)
     info.size = len(data)
     info.mode = 0o644
-    info.mtime = int(time.time())
+    info.mtime = mtime
     tf.addfile(info, io.BytesIO(data))
 
 
 def _open(path: Path) -> tuple[tarfile.TarFile, dict[str, tarfile.TarInfo]]:
     """Open the archive and index its members by name, refusing any unexpected or unsafe member."""
+    if path.is_dir():
+        raise InputError(f"archive {path}: is a folder, not an archive file (make one with "
+                         "'arboretum library export LIB ARCHIVE')")
     if not path.is_file():
         raise InputError(f"archive {path} does not exist")
     try:

@@ -9,6 +9,8 @@
     arboretum library import ARCHIVE LIB [--on-conflict skip|replace|rename]
 
 Every subcommand takes ``--json``. Missing or foreign libraries and archives exit 2 with one line.
+Actions that other installed packages add (the server's ``build``) are listed after these;
+``arboretum library ACTION --help`` shows each action's options.
 """
 
 from __future__ import annotations
@@ -48,7 +50,30 @@ def register(subparsers: Any) -> None:
     for p in sub.choices.values():
         add_json_flag(p)
         p.set_defaults(func=run)
+    own = set(sub.choices)
     register_extensions(sub, "arboretum.library_commands")
+    extra = "".join(f"    {usage_line(f'arboretum library {name}', p)}\n"
+                    for name, p in sub.choices.items() if name not in own)
+    parser.description = __doc__.replace(_LAST_USAGE, _LAST_USAGE + extra)
+
+
+_LAST_USAGE = "    arboretum library import ARCHIVE LIB [--on-conflict skip|replace|rename]\n"
+"""The last line of the usage block in this module's docstring: extension actions go after it."""
+
+
+def usage_line(prog: str, parser: argparse.ArgumentParser) -> str:
+    """A one-line usage of ``parser`` run as ``prog``: its positionals, its required options and
+    ``[options]`` when it has others ("arboretum library build SCAN... --library LIB [options]")."""
+    words, optional = [prog], False
+    for a in parser._actions:
+        name = a.metavar if isinstance(a.metavar, str) else a.dest.upper()
+        if not a.option_strings:
+            words.append({"+": f"{name}...", "*": f"[{name}...]", "?": f"[{name}]"}.get(a.nargs, name))
+        elif a.required:
+            words.append(f"{a.option_strings[-1]} {name}" if a.nargs != 0 else a.option_strings[-1])
+        elif not isinstance(a, argparse._HelpAction):
+            optional = True
+    return " ".join(words + ["[options]"] * optional)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -161,11 +186,16 @@ def _delete(args: argparse.Namespace) -> tuple[dict, str]:
 
 
 def _export(args: argparse.Namespace) -> tuple[dict, str]:
+    from arboretum_library.outputs import check_output
     from arboretum_library.progress import StatusLine
 
+    # before the library is opened (which may rebuild its catalog): an ARCHIVE inside the library
+    # would replace one of its files, one in a missing folder would fail after the work
+    check_output(args.archive, "ARCHIVE", libraries=[args.library])
     with _open(args.library) as lib:
         out = lib.export_archive(args.archive, progress=StatusLine())
-    return out, f"exported {out['examples']} examples to {out['archive']} ({out['size_bytes']} bytes)"
+    n = out["examples"]
+    return out, f"exported {n} example{'s' * (n != 1)} to {out['archive']} ({out['size_bytes']} bytes)"
 
 
 def _import(args: argparse.Namespace) -> tuple[dict, str]:

@@ -54,8 +54,10 @@ def check_args(args: argparse.Namespace) -> str:
     from arboretum_server.decompose.options import DecomposeOptions
     from arboretum_server.decompose.preprocess import check_points
 
-    if args.points < 0 or not (math.isfinite(args.height) and args.height > 0):
-        raise InputError("--points must not be negative and --height must be a finite number > 0")
+    if args.points < 0:
+        raise InputError(f"--points must not be negative (0: all), got {args.points}")
+    if not (math.isfinite(args.height) and args.height > 0):
+        raise InputError(f"--height must be a finite number > 0, got {args.height}")
     check_seed(args.seed)
     check_points(DecomposeOptions(points=args.points), "--points")
     folder = args.report or f"{str(Path(args.library)).rstrip('/')}-report"
@@ -127,10 +129,12 @@ def _waiting_on_stderr():
 
 
 def _text(d: dict) -> str:
+    from .report import counted
+
     redone = f"; {d['redone']} of them done again: --rebuild, or damaged" if d.get("redone") else ""
-    lines = [f"{d['library']}: {d['added']} scans added ({d['examples_added']} examples{redone}), "
-             f"{d['skipped']} already there, {d['duplicate']} duplicates, {d['failed']} failed, in {d['wall_seconds']:.1f} s "
-             f"on {d['workers']} workers ({d['cluster'] or 'no cluster needed'})"]
+    lines = [f"{d['library']}: {counted(d['added'], 'scan')} added ({counted(d['examples_added'], 'example')}{redone}), "
+             f"{d['skipped']} already there, {counted(d['duplicate'], 'duplicate')}, {d['failed']} failed, "
+             f"in {d['wall_seconds']:.1f} s on {counted(d['workers'], 'worker')} ({d['cluster'] or 'no cluster needed'})"]
     lines += [f"  failed: {r['path']}: {r['error']}" for r in d["records"] if r["status"] == "failed"]
     lines += [f"  note: {r['path']}: {n}" for r in d["records"] for n in r["notes"]]
     lines += [f"  left out: {i['path']}: {i['why']}" for i in d.get("ignored", [])]

@@ -101,14 +101,19 @@ def _png(img) -> bytes:
     return buf.getvalue()
 
 
+def counted(n: int, word: str) -> str:
+    """``n`` and ``word``, plural unless ``n`` is 1: "1 scan", "2 scans", "0 workers"."""
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
 def markdown(data: dict[str, Any], plots: dict[str, str]) -> str:
     """The report as markdown text."""
     speed = data["worker_seconds"] / data["wall_seconds"] if data["wall_seconds"] > 0 else 0.0
     lines = [
         f"# Library build: {data['library']}", "",
-        f"- cluster: {data['cluster'] or '(none needed)'}, {data['workers']} workers",
-        f"- scans: {data['scans']} given; {data['added']} added ({data['examples_added']} examples), "
-        f"{data['skipped']} already in the library, {data['duplicate']} duplicates, {data['failed']} failed"
+        f"- cluster: {data['cluster'] or '(none needed)'}, {counted(data['workers'], 'worker')}",
+        f"- scans: {data['scans']} given; {data['added']} added ({counted(data['examples_added'], 'example')}), "
+        f"{data['skipped']} already in the library, {counted(data['duplicate'], 'duplicate')}, {data['failed']} failed"
         + (f"; {data['redone']} in the library done again (--rebuild, or damaged)" if data["redone"] else ""),
         f"- time: {data['wall_seconds']:.1f} s wall, {data['worker_seconds']:.1f} s of worker time "
         f"({speed:.2f}x)", "",

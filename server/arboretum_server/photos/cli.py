@@ -12,7 +12,11 @@ import argparse
 import os
 import time
 
+from arboretum_library.checks import check_seed
 from arboretum_library.cli import add_json_flag, emit
+
+COLMAP_MAX_SEED = 2 ** 31 - 1
+"""COLMAP's seeds are C ints: pycolmap refuses a larger ``random_seed`` with a TypeError."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -38,15 +42,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from arboretum_library.errors import InputError
     from arboretum_library.pointio import write_points
     from arboretum_library.progress import StatusLine
 
     from .isolate import IsolateOptions, apply, isolate
 
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-    if (args.images is None) == (args.colmap_model is None):
-        raise InputError("give either IMAGES_DIR or --colmap-model DIR (one of them)")
+    _check_args(args)
     iso_opts = IsolateOptions(height=args.height, seed=args.seed)
     t0 = time.perf_counter()
     cloud = _cloud(args, StatusLine() if not args.json else (lambda *a: None))
@@ -66,6 +68,20 @@ def run(args: argparse.Namespace) -> int:
             "seconds": {"sfm": t_sfm, "total": time.perf_counter() - t0}}
     emit(args, data, _text(data))
     return 0
+
+
+def _check_args(args: argparse.Namespace) -> None:
+    """InputError naming the option for a mistake, before any image is read or COLMAP started."""
+    from arboretum_library.errors import InputError
+    from arboretum_library.outputs import check_output
+    from arboretum_library.pointio import WRITERS
+
+    if (args.images is None) == (args.colmap_model is None):
+        raise InputError("give either IMAGES_DIR or --colmap-model DIR (one of them)")
+    check_seed(args.seed)
+    if args.images is not None and args.seed > COLMAP_MAX_SEED:
+        raise InputError(f"--seed must be at most {COLMAP_MAX_SEED} (COLMAP's largest), got {args.seed}")
+    check_output(args.out, "--out", suffixes=tuple(WRITERS))
 
 
 def _cloud(args: argparse.Namespace, progress):
