@@ -1,11 +1,12 @@
 """``arboretum client``: the interactive client (desktop window, VR, or a headless script).
 
-    arboretum client [--connect ADDRESS | --offline] [--library LIB] [--scan FILE] [--size WxH]
-                     [--headless] [--script S] [--screenshot out.png] [--vr] [--out DIR] [--json]
+    arboretum client [--connect ADDRESS [--curve KEYDIR] | --offline] [--library LIB] [--scan FILE]
+                     [--size WxH] [--headless] [--script S] [--screenshot out.png] [--vr] [--out DIR] [--json]
                      [--reference IMAGE [--reference-height METRES]]
 
 Without ``--connect`` (and without ``--offline``, which uses built-in demo examples and no server) an
 embedded ``arboretum serve`` starts as a child process on a free loopback port and stops on exit.
+``--curve KEYDIR`` connects to a ``serve --curve`` server with CurveZMQ keys (``Remote(curve=...)``).
 ``--headless`` renders with EGL (no display); ``--script`` feeds recorded input (see
 ``arboretum_client.scripts``), in a window too; ``--screenshot`` saves the last frame. ``--vr`` uses an
 OpenXR runtime when one is present and otherwise says why and opens the desktop window.
@@ -32,6 +33,8 @@ def register(subparsers) -> None:
     where = p.add_mutually_exclusive_group()
     where.add_argument("--connect", metavar="ADDRESS", help="server endpoint, e.g. tcp://127.0.0.1:5555")
     where.add_argument("--offline", action="store_true", help="no server: built-in demo examples in memory")
+    p.add_argument("--curve", metavar="KEYDIR", help="CurveZMQ keys for --connect: a folder from 'arboretum keys "
+                   "generate' (its client.key_secret, or its only client secret) or one NAME.key_secret beside server.key")
     p.add_argument("--library", metavar="LIB", help="an existing example library for the embedded server")
     p.add_argument("--scan", metavar="FILE", help="point cloud to refine (refinement mode, Tab)")
     p.add_argument("--size", default="1280x720", help="window or image size WIDTHxHEIGHT (default 1280x720)")
@@ -63,7 +66,8 @@ def _port_factory(args, cleanup: list):
         server = start_server(args.library)
         cleanup.append(server.stop)
         endpoint = server.endpoint
-    return lambda: RemoteSession(endpoint)
+    curve = getattr(args, "curve", None)  # only with --connect (check_args)
+    return lambda: RemoteSession(endpoint, curve=curve)
 
 
 def _scan(path: str | None):
@@ -109,6 +113,7 @@ def check_args(args: argparse.Namespace) -> tuple[int, int]:
         if m is None or (m.group(2) is not None and not 0 < int(m.group(2)) < 65536):
             raise InputError(f"--connect: {args.connect!r} is not a server address (tcp://HOST:PORT, e.g. "
                              "tcp://127.0.0.1:5555, or ipc://PATH)")
+    _check_curve(args)
     if args.library is not None:
         if args.offline or args.connect is not None:
             raise InputError("--library is the embedded server's library: with --offline or --connect it would "
@@ -121,6 +126,22 @@ def check_args(args: argparse.Namespace) -> tuple[int, int]:
     if Path(args.out).exists() and not Path(args.out).is_dir():
         raise InputError(f"--out {args.out}: is a file, not a folder")
     return size
+
+
+def _check_curve(args: argparse.Namespace) -> None:
+    """``--curve`` only with ``--connect``, and its keys readable (one error line, before any window)."""
+    from arboretum_library.errors import InputError
+    from arboretum_library.remote import client_keys
+
+    curve = getattr(args, "curve", None)
+    if curve is None:
+        return
+    if args.connect is None:
+        raise InputError("--curve KEYDIR needs --connect ADDRESS (the embedded server and --offline use no keys)")
+    try:
+        client_keys(curve)
+    except InputError as exc:
+        raise InputError(f"--curve: {exc}") from None
 
 
 def run(args: argparse.Namespace) -> int:

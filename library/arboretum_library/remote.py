@@ -41,15 +41,21 @@ class RemoteError(ArboretumError):
 
 
 class Remote:
-    """A connection to an Arboretum server."""
+    """A connection to an Arboretum server. For a ``serve --curve`` server, ``curve`` is a key folder from
+    ``arboretum keys generate`` or one client's ``*.key_secret``, and ``curve_client`` names the client
+    whose secret to use from the folder (see ``client_keys``)."""
 
     def __init__(self, endpoint: str = "tcp://127.0.0.1:5555", *, timeout: float = 10.0, retries: int = 2,
-                 curve: str | os.PathLike | None = None, handshake: bool = True,
-                 zctx: zmq.Context | None = None) -> None:
+                 curve: str | os.PathLike | None = None, curve_client: str | None = None,
+                 handshake: bool = True, zctx: zmq.Context | None = None) -> None:
         self.endpoint = endpoint
         self.timeout = timeout
         self.retries = retries
-        self._curve = _client_keys(Path(curve)) if curve is not None else None
+        if curve is None and curve_client is not None:
+            from .errors import InputError
+
+            raise InputError(f"curve_client={curve_client!r} needs curve=KEYDIR")
+        self._curve = client_keys(curve, curve_client) if curve is not None else None
         self._zctx = zctx or zmq.Context.instance()
         self._next_id = secrets.randbits(40) << 20
         self.client = secrets.token_hex(16)
@@ -193,17 +199,97 @@ class Remote:
         return self.call(req, progress=progress, timeout=timeout)
 
 
-def _client_keys(folder: Path) -> tuple[bytes, bytes, bytes]:
-    """(server public, client public, client secret) from a folder made by ``arboretum keys generate``."""
+CLIENT = "client"
+"""The client key pair ``curve=DIR`` uses when ``DIR`` holds several (``arboretum keys generate``'s default)."""
+
+
+def client_keys(curve: str | os.PathLike, name: str | None = None) -> tuple[bytes, bytes, bytes]:
+    """(server public, client public, client secret), Z85, for ``Remote(curve=...)``.
+
+    ``curve`` is a folder from ``arboretum keys generate`` (its ``NAME.key_secret`` when ``name`` is given,
+    else ``client.key_secret``, else its only client secret) or the path of one ``*.key_secret``; either
+    way ``server.key`` lies next to the secret. ``InputError`` naming the file for a missing, unreadable or
+    malformed key, and listing the secrets when several could be meant."""
+    from .errors import InputError
+
+    path = Path(curve)
+    if path.is_file():
+        if name is not None:
+            raise InputError(f"{path}: a client name ({name!r}) picks a secret in a key folder; give the folder "
+                             "or this file alone")
+        if path.name == "server.key_secret":
+            raise InputError(f"{path}: is the server's secret key; give a client's *.key_secret")
+        folder, secret = path.parent, path
+    elif path.is_dir():
+        folder, secret = path, path / f"{_choose_client(path, name)}.key_secret"
+    else:
+        raise InputError(f"{path}: no such key folder or *.key_secret file (make keys with 'arboretum keys generate DIR')")
+    if not (folder / "server.key").is_file():
+        raise InputError(f"{folder}: needs server.key (the server's public key) next to {secret.name}")
+    server_pub, _ = load_key(folder / "server.key")
+    pub, sec = load_key(secret, secret=True)
+    assert sec is not None  # load_key(secret=True) checked it
+    return server_pub, pub, sec
+
+
+def _choose_client(folder: Path, name: str | None) -> str:
+    """The client key pair to use from ``folder`` (see ``client_keys``)."""
+    from .errors import InputError
+
+    found = sorted(p.name[: -len(".key_secret")] for p in folder.glob("*.key_secret")
+                   if p.name != "server.key_secret" and not p.name.startswith("."))
+    listed = ", ".join(found) or "none"
+    if name is not None:
+        if name not in found:
+            raise InputError(f"{folder}: no {name}.key_secret (client secrets here: {listed})")
+        return name
+    if CLIENT in found or len(found) == 1:
+        return CLIENT if CLIENT in found else found[0]
+    if not found:
+        raise InputError(f"{folder}: needs server.key and a client *.key_secret (arboretum keys generate)")
+    raise InputError(f"{folder}: holds several client secrets ({listed}) and no {CLIENT}.key_secret; choose one by "
+                     f"the path of its .key_secret (e.g. {folder / found[0]}.key_secret) or, in Python, "
+                     f"curve_client={found[0]!r}")
+
+
+def load_key(path: str | os.PathLike, *, secret: bool = False) -> tuple[bytes, bytes | None]:
+    """(public, secret or None), Z85, from a CurveZMQ certificate file. ``InputError`` naming ``path`` when it
+    cannot be read, holds no well-formed public key or, with ``secret``, no secret key matching it."""
     import zmq.auth
 
     from .errors import InputError
 
-    secrets_ = sorted(p for p in folder.glob("*.key_secret") if p.name != "server.key_secret")
-    if not (folder / "server.key").is_file() or not secrets_:
-        raise InputError(f"{folder}: needs server.key and a client *.key_secret (arboretum keys generate)")
-    server_pub, _ = zmq.auth.load_certificate(folder / "server.key")
-    pub, sec = zmq.auth.load_certificate(secrets_[0])
-    if sec is None:
-        raise InputError(f"{secrets_[0]}: holds no secret key")
-    return server_pub, pub, sec
+    path = Path(path)
+    try:
+        pub, sec = zmq.auth.load_certificate(path)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot be read ({exc.strerror or exc})") from None
+    except (ValueError, IndexError):
+        empty = path.stat().st_size == 0
+        raise InputError(f"{path}: {'is empty' if empty else 'holds no public-key line'}, not a CurveZMQ key "
+                         "file") from None
+    _check_z85(path, "public", pub)
+    if secret:
+        if sec is None:
+            raise InputError(f"{path}: holds no secret key")
+        _check_z85(path, "secret", sec)
+        if zmq.curve_public(sec) != pub:
+            raise InputError(f"{path}: its secret key does not belong to its public key (edited or mixed files?)")
+    return pub, sec
+
+
+def _check_z85(path: Path, kind: str, key: bytes) -> None:
+    """``InputError`` unless ``key`` is 40 Z85 characters encoding 32 bytes."""
+    import struct
+
+    from zmq.utils import z85
+
+    from .errors import InputError
+
+    ok = len(key) == 40 and all(c in z85.Z85CHARS for c in key)
+    try:
+        ok = ok and len(z85.decode(key)) == 32
+    except (ValueError, struct.error):  # a group above 2**32 - 1
+        ok = False
+    if not ok:
+        raise InputError(f"{path}: its {kind} key is not 40 Z85 characters (truncated or edited?)")

@@ -40,26 +40,59 @@ def check_bind(bind: str, curve: str | None, insecure: bool) -> None:
 
 
 def curve_keys(folder: str):
-    """(server public, server secret) and the authenticator accepting ``folder/clients/*.key``."""
+    """(server public, server secret) and the authenticator accepting the keys in ``folder/clients/*.key``.
+
+    Every key file is read here, before anything starts: one that cannot be read (a stray README.key, a
+    truncated key) or an empty ``clients/`` is an ``InputError`` naming it, never a server that silently
+    refuses every client. Keys added later need a restart."""
     from pathlib import Path
 
     import zmq
-    import zmq.auth
     from zmq.auth.thread import ThreadAuthenticator
 
     from arboretum_library.errors import InputError
+    from arboretum_library.remote import load_key
 
     root = Path(folder)
     secret = root / "server.key_secret"
     if not secret.is_file() or not (root / "clients").is_dir():
         raise InputError(f"--curve {folder}: no server.key_secret and clients/ (run 'arboretum keys generate {folder}')")
-    pub, sec = zmq.auth.load_certificate(secret)
-    if sec is None:
-        raise InputError(f"{secret}: holds no secret key")
+    pub, sec = load_key(secret, secret=True)
+    accepted = accepted_keys(root)
     auth = ThreadAuthenticator(zmq.Context.instance())
     auth.start()
-    auth.configure_curve(domain="*", location=str(root / "clients"))
+    auth.configure_curve_callback(domain="*", credentials_provider=_Accepted(accepted))
     return (pub, sec), auth
+
+
+def accepted_keys(root) -> frozenset[bytes]:
+    """The Z85 public keys of ``root/clients/*.key`` (dot files skipped); ``InputError`` naming the first
+    file that is not a client's public key, or when there is none."""
+    from arboretum_library.errors import InputError
+    from arboretum_library.remote import load_key
+
+    files = sorted(p for p in (root / "clients").glob("*.key") if not p.name.startswith("."))
+    if not files:
+        raise InputError(f"--curve {root}: clients/ holds no client key (*.key), so no client could connect; "
+                         f"add one with 'arboretum keys generate {root} --client NAME'")
+    keys = set()
+    for path in files:
+        try:
+            keys.add(load_key(path)[0])
+        except InputError as exc:
+            raise InputError(f"--curve {root}: {exc}; every clients/*.key must be a client's public key "
+                             "(move other files out)") from None
+    return frozenset(keys)
+
+
+class _Accepted:
+    """pyzmq's CURVE credentials provider: a client is let in when its public key was in ``clients/``."""
+
+    def __init__(self, keys: frozenset[bytes]) -> None:
+        self.keys = keys
+
+    def callback(self, domain: str, key: bytes) -> bool:
+        return key in self.keys
 
 
 def run(args: argparse.Namespace) -> int:

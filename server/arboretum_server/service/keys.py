@@ -45,9 +45,8 @@ def check_client(client: str) -> None:
 
 def generate(folder: str | os.PathLike, client: str = "client", force: bool = False) -> dict[str, str]:
     """Create the client's key files in ``folder`` (and the server's when missing); returns their paths
-    and ``server_key`` ('created' or 'kept'). ``InputError`` if the client's keys exist (unless ``force``)."""
-    import zmq.auth
-
+    and ``server_key`` ('created' or 'kept'). ``InputError`` if the client's keys exist (unless ``force``).
+    Secret files are mode 0600 from their creation on, public ones 0644."""
     from arboretum_library.errors import InputError
 
     check_client(client)
@@ -65,13 +64,44 @@ def generate(folder: str | os.PathLike, client: str = "client", force: bool = Fa
     (root / "clients").mkdir(parents=True, exist_ok=True)
     kept = server_sec.exists()
     if not kept:
-        server_pub, server_sec = map(Path, zmq.auth.create_certificates(root, SERVER))
-        os.chmod(server_sec, 0o600)
-    client_pub, client_sec = map(Path, zmq.auth.create_certificates(root, client))
-    os.chmod(client_sec, 0o600)
-    os.replace(client_pub, accepted)
+        _write_pair(server_sec, server_pub)
+    _write_pair(client_sec, accepted)
     return {"server_public": str(server_pub), "server_secret": str(server_sec), "server_key": "kept" if kept else "created",
             "client_secret": str(client_sec), "client_public": str(accepted)}
+
+
+SECRET_MODE, PUBLIC_MODE = 0o600, 0o644
+"""File modes of ``*.key_secret`` (owner only, from the moment the file exists) and of public ``*.key``."""
+
+
+def _write_pair(secret: Path, public: Path) -> None:
+    """A new CurveZMQ key pair as the certificate files ``secret`` and ``public`` (the format
+    ``zmq.auth.load_certificate`` reads), secret first."""
+    import zmq
+
+    pub, sec = (k.decode("ascii") for k in zmq.curve_keypair())
+    _write_key(secret, "Secret", f'    public-key = "{pub}"\n    secret-key = "{sec}"\n', SECRET_MODE)
+    _write_key(public, "Public", f'    public-key = "{pub}"\n', PUBLIC_MODE)
+
+
+def _write_key(path: Path, kind: str, keys: str, mode: int) -> None:
+    """Write a certificate to a temporary file opened with ``mode`` (so a secret is never readable by
+    others, whatever the umask), then rename it over ``path``: an interrupted run leaves no half file."""
+    import secrets
+
+    text = (f"#   ZeroMQ CURVE {kind} Certificate, written by 'arboretum keys generate'\n"
+            + ("#   Keep it private: it lets its holder in.\n" if kind == "Secret" else "")
+            + f"\nmetadata\ncurve\n{keys}")
+    tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, mode)
+    try:
+        with os.fdopen(fd, "w", encoding="ascii") as fh:
+            os.fchmod(fh.fileno(), mode)  # exact: the umask can only have narrowed it
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def run(args: argparse.Namespace) -> int:
