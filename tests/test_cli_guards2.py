@@ -158,7 +158,7 @@ def test_a_client_added_later_can_connect(tmp_path):
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
     try:
-        for folder in (alice, k):  # k: its first client secret is alice's, then the first client's
+        for folder in (alice, k):  # k: its client.key_secret (alice.key_secret is used only when chosen by name)
             with Remote(server.endpoint, curve=folder, timeout=5) as r:
                 assert r.welcome is not None
     finally:
