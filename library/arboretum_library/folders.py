@@ -156,6 +156,9 @@ def check_marker(root: Path, create: bool) -> None:
         if not create:
             what = "is not an Arboretum library (no library.json)" if root.exists() else "does not exist"
             raise InputError(f"library {root} {what}")
+        if (outer := enclosing_library(root)) is not None:
+            raise InputError(f"library {root}: lies inside the library {outer}, whose folders only it "
+                             "writes; create the new library outside it")
         root.mkdir(parents=True, exist_ok=True)
         tmp = root / f".library.json.{os.getpid()}.tmp"
         tmp.write_text(json.dumps({"format": LIBRARY_FORMAT, "schema": SCHEMA_VERSION, "created": now_utc()}) + "\n")
@@ -169,6 +172,15 @@ def check_marker(root: Path, create: bool) -> None:
         raise InputError(f"{root} is not an Arboretum library ({marker} has no '{LIBRARY_FORMAT}' marker)")
     if not isinstance(head.get("schema"), int) or head["schema"] > SCHEMA_VERSION:
         raise InputError(f"library {root} has schema {head.get('schema')!r}, newer than this Arboretum reads ({SCHEMA_VERSION})")
+
+
+def enclosing_library(path: Path) -> Path | None:
+    """The nearest folder above ``path`` (links resolved) holding a ``library.json``, or None."""
+    try:
+        parents = Path(path).resolve().parents
+    except (OSError, RuntimeError):  # a link loop
+        return None
+    return next((p for p in parents if (p / "library.json").is_file()), None)
 
 
 def safe_prefix(text: str) -> str:
