@@ -69,7 +69,8 @@ def test_yaml_script_builds_the_session(tmp_path, lib, capsys):
     ("- add: {example: ex-0}\n- export: {out: t.glb, options: {density: 1000}}",
      "operation 2 (export): growth option density must be a number > 0 and <= 20, got 1000"),
     ("- add: {example: ex-0}\n- export: {out: t.glb, seed: -3}", "operation 2 (export): seed must not be negative"),
-    ("- add: {example: ex-0}\n- export: {out: t.glb, lod: 99}", "operation 2 (export): --lod must be 0"),
+    ("- add: {example: ex-0}\n- export: {out: t.glb, lod: 99}",
+     "operation 2 (export): lod must be a whole number from 0 to 16, got 99"),
 ])
 def test_script_mistakes_are_one_line_errors(tmp_path, lib, capsys, text, message):
     script = tmp_path / "bad.yaml"

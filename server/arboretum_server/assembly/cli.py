@@ -13,7 +13,10 @@ Each operation is a one-key map, run by the same handlers as the server, in-proc
     - export: {out: tree.glb, seed: 0, lod: 0, options: {density: 0.5}}
 
 A transform is ``T`` (a 4x4 matrix) or ``at`` (translation, metres), ``rotate`` ([axis x, y, z, degrees])
-or ``rotate_z`` (degrees) and ``scale``. ``--out`` writes the session (an Assembly record, .npz).
+or ``rotate_z`` (degrees) and ``scale``; ``transform`` and ``transform_lobe`` keep the current value of
+each of them left out. The whole script is checked before it runs (``script_check``); exports are
+written aside and moved into place, after ``--out``, only once every operation succeeded (``script``).
+``--out`` writes the session (an Assembly record, .npz).
 """
 
 from __future__ import annotations
@@ -50,17 +53,34 @@ def read_script(path: str | Path) -> tuple[str, list[dict]]:
     except UnicodeDecodeError:
         raise InputError(f"{p}: not a text file; the script must be JSON or YAML text") from None
     try:
-        data = json.loads(text) if p.suffix.lower() == ".json" else yaml.safe_load(text)
+        data = json.loads(text) if p.suffix.lower() == ".json" else yaml.load(text, Loader=yaml_loader())
     except (json.JSONDecodeError, yaml.YAMLError) as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else str(exc).splitlines()[0]
         raise InputError(f"{p}: not valid {'JSON' if p.suffix.lower() == '.json' else 'YAML'} ({where})") from None
     name, ops = "", data
     if isinstance(data, dict):
+        if "ops" in data and (extra := sorted(str(k) for k in data if k not in ("name", "ops"))):
+            raise InputError(f"{p}: unknown key {extra[0]!r}; a script map takes name and ops")
         name, ops = str(data.get("name", "")), data.get("ops")
     if not isinstance(ops, list) or not all(isinstance(o, dict) and len(o) == 1 for o in ops):
         raise InputError(f"{p}: expected a list of one-key maps such as '- add: {{example: ID}}'")
     return name, ops
+
+
+def yaml_loader():
+    """PyYAML's safe loader, reading numbers such as ``1e-3`` or ``1e300`` as numbers (YAML 1.2) where
+    plain PyYAML (YAML 1.1) reads them as text: ``scale: 1e-3`` is a number in a script."""
+    import re
+
+    import yaml
+
+    class Loader(yaml.SafeLoader):
+        pass
+
+    exponent = re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$")
+    Loader.add_implicit_resolver("tag:yaml.org,2002:float", exponent, list("-+0123456789."))
+    return Loader
 
 
 def open_library(path: str | Path):
@@ -90,21 +110,25 @@ def run(args: argparse.Namespace) -> int:
     from arboretum_library.progress import StatusLine
 
     from .script import Runner
+    from .script_check import check_ops
 
     # --out may be the --from session: it is read whole first and replaced atomically at the end (the
-    # demo continues a session in place); the script must never be overwritten
-    check_output(args.out, inputs=[args.script])
+    # demo continues a session in place); the script and the library's files must never be overwritten
+    check_output(args.out, inputs=[args.script], libraries=[args.library])
     name, ops = read_script(args.script)
+    # the whole script is checked before anything runs: a mistake in any operation writes nothing
+    checked = check_ops(ops, inputs=[args.script, args.start], outputs=[args.out], libraries=[args.library])
     start = load_record(args.start, Assembly) if args.start else None
+    library = open_library(args.library)  # read-only: the runner's context closes it
     with tempfile.TemporaryDirectory(prefix="arboretum-assemble-") as state:
-        runner = Runner(Path(args.library), Path(state), name, start)
+        runner = Runner(Path(args.library), Path(state), name, start, opened=library)
         try:
-            runner.ctx._library = open_library(args.library)  # read-only: the context closes it
-            results = [runner.run(i, op, None if args.json else StatusLine()) for i, op in enumerate(ops)]
+            results = [runner.run(op, None if args.json else StatusLine()) for op in checked]
             assembly = runner.assembly()
+            save_record(args.out, assembly)
+            runner.commit()  # the exports' files, written aside until now, are moved into place
         finally:
             runner.close()
-    save_record(args.out, assembly)
     data: dict[str, Any] = {
         "out": args.out, "operations": results, "placements": [p.instance for p in assembly.placements],
         "merges": [[m.a, m.b, m.vertex_a, m.vertex_b] for m in assembly.merges],
