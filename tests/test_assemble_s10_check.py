@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from arboretum_library.assembly import Assembly
 from arboretum_library.cli import main
 from arboretum_library.codec import load_record
-from arboretum_library.model import Assembly
 from factories import make_library
 
 

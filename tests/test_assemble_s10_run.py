@@ -10,10 +10,10 @@ import math
 import numpy as np
 import pytest
 
+from arboretum_library.assembly import Assembly
 from arboretum_library.cli import main
 from arboretum_library.codec import load_record
 from arboretum_library.geometry import axis_angle_matrix
-from arboretum_library.model import Assembly
 from arboretum_server.assembly.script import Runner
 from arboretum_server.assembly.script_check import Op, Pose
 from factories import make_library

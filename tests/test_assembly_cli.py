@@ -7,9 +7,9 @@ import json
 import numpy as np
 import pytest
 
+from arboretum_library.assembly import Assembly
 from arboretum_library.cli import main
 from arboretum_library.codec import load_record
-from arboretum_library.model import Assembly
 from arboretum_library.store import Library
 from factories import make_example
 

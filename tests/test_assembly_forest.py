@@ -15,11 +15,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from arboretum_library import protocol as P
+from arboretum_library.assembly import Assembly, MergeLink, Placement
 from arboretum_library.cli import main
 from arboretum_library.codec import META_KEY, arrays_to_npz, load_record, npz_to_arrays, save_record
 from arboretum_library.errors import InputError, ValidationError
 from arboretum_library.geometry import make_transform
-from arboretum_library.model import Assembly, MergeLink, Placement
 from arboretum_server.assembly.state import Autosave, append_entry
 from arboretum_server.service.context import Context
 from arboretum_server.service.dispatch import Dispatcher

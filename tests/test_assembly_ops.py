@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from arboretum_library.assembly import Assembly
 from arboretum_library.errors import InputError
 from arboretum_library.geometry import axis_angle_matrix, make_transform
-from arboretum_library.model import HBL, Assembly, Branch, Example, Level, Provenance
+from arboretum_library.model import HBL, Branch, Example, Level, Provenance
 from arboretum_server.assembly import ops
 from arboretum_server.assembly.recombine import RecombineOptions
 from arboretum_server.assembly.sketch import recognise

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from arboretum_library.assembly import Assembly, Placement
 from arboretum_library.errors import InputError
 from arboretum_library.geometry import make_transform
-from arboretum_library.model import Assembly, Placement
 from arboretum_server.assembly import state
 from arboretum_server.assembly.state import Autosave, History
 

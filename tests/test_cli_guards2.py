@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from arboretum_library.assembly import Assembly
 from arboretum_library.cli import main
 from arboretum_library.codec import load_record
 from arboretum_library.errors import InputError
-from arboretum_library.model import Assembly
 from arboretum_library.pointio import read_points, write_points
 from arboretum_library.pointio_formats import sniff_not_points
 from arboretum_library.store import Library

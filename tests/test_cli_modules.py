@@ -10,10 +10,11 @@ import pygltflib
 import pytest
 import trimesh
 
+from arboretum_library.assembly import Assembly
 from arboretum_library.cli import main
 from arboretum_library.codec import save_record
 from arboretum_library.export.instanced import EXTENSION
-from arboretum_library.model import HBL, Assembly
+from arboretum_library.model import HBL
 from arboretum_server.grow.demo import demo_hbl
 from arboretum_server.modules.meshio import save_obj
 from arboretum_server.modules.shapes import tetrahedron_mesh
@@ -103,7 +104,7 @@ def test_user_errors_are_one_line(tmp_path, files, capsys, argv, message):
 
 
 def test_assembly_record_with_library(tmp_path, capsys):
-    from arboretum_library.model import Placement
+    from arboretum_library.assembly import Placement
     from arboretum_library.store import Library
     from factories import make_example
 

@@ -13,7 +13,7 @@ from arboretum_client.demo import demo_example
 from arboretum_client.input.desktop import DesktopInput, Key, MouseButton, MouseMove, cursor_ray
 from arboretum_client.input.hands import LEFT, LONG_PRESS, RIGHT, Hands, HandSample, HandTracker
 from arboretum_client.tools.gizmo import drag_example, drag_lobe
-from arboretum_library.model import LobeTransform, Placement
+from arboretum_library.assembly import LobeTransform, Placement
 
 
 def pose(p, yaw=0.0):
@@ -150,7 +150,7 @@ def test_the_wheel_scale_is_bounded_and_an_out_of_range_preview_draws_nothing():
     from arboretum_client.overlay import overlay_scene
     from arboretum_client.tools.interaction import Drag
     from arboretum_client.tools.state import ClientState
-    from arboretum_library.model import Assembly
+    from arboretum_library.assembly import Assembly
 
     desk = DesktopInput(Camera(target=(0, 0, 1), distance=4.0), (640, 480))
     desk.handle(MouseMove(320, 240))

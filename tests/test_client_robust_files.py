@@ -16,9 +16,9 @@ from arboretum_client.input.desktop import Key
 from arboretum_client.net import Worker
 from arboretum_client.scripts import ScriptRunner
 from arboretum_client.session_fake import FakeSession
+from arboretum_library.assembly import Assembly
 from arboretum_library.codec import load_record
 from arboretum_library.errors import InputError
-from arboretum_library.model import Assembly
 
 PLACE = [{"action": "choose:oak-0001"}, {"world": [0, 0, 0]}, {"click": "left"}]
 

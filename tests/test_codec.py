@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from arboretum_library.assembly import Assembly, LobeTransform, MergeLink, Placement
 from arboretum_library.codec import (
     arrays_to_npz,
     flatten,
@@ -19,18 +20,7 @@ from arboretum_library.codec import (
 from arboretum_library.descriptors import describe, tags_for
 from arboretum_library.errors import InputError, ValidationError
 from arboretum_library.geometry import make_transform
-from arboretum_library.model import (
-    HBL,
-    Assembly,
-    Branch,
-    Example,
-    Level,
-    Lobe,
-    LobeTransform,
-    MergeLink,
-    Placement,
-    Provenance,
-)
+from arboretum_library.model import HBL, Branch, Example, Level, Lobe, Provenance
 
 
 def sample_example(rng: np.random.Generator) -> Example:

@@ -179,9 +179,9 @@ def test_random_cuts_and_flips_read_or_refuse(compress):
 
 def test_a_record_file_with_an_empty_tuple_descr_is_one_input_error(tmp_path):
     """``arboretum render`` and every record loader read through ``load_record``: no traceback."""
+    from arboretum_library.assembly import Assembly
     from arboretum_library.codec import load_record
     from arboretum_library.errors import InputError
-    from arboretum_library.model import Assembly
 
     path = tmp_path / "bad_record.npz"
     path.write_bytes(_zip({"x.npy": _npy(_header("(1,)", "()"))}))

@@ -147,8 +147,8 @@ def test_demo_assembly_has_merge_link(demo_run):
     assert ["trunk", "top"] in [m[:2] for m in asm["merges"]]
     moved = asm["operations"][-1]
     assert moved["op"] == "transform" and moved["merged"] == ["trunk"]
+    from arboretum_library.assembly import Assembly
     from arboretum_library.codec import load_record
-    from arboretum_library.model import Assembly
 
     assert len(load_record(out / "session.npz", Assembly).merges) == len(asm["merges"]) >= 3
 

@@ -88,10 +88,10 @@ def test_grow_an_assembly_against_its_library(tmp_path, capsys):
     """`arboretum grow` takes a saved Assembly with --library, as issue 5 specifies (HBL_OR_ASSEMBLY)."""
     import json
 
+    from arboretum_library.assembly import Assembly, Placement
     from arboretum_library.cli import main
     from arboretum_library.codec import save_record
     from arboretum_library.geometry import make_transform
-    from arboretum_library.model import Assembly, Placement
     from arboretum_library.store import Library
     from factories import make_example
 

@@ -5,20 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from arboretum_library.assembly import Assembly, MergeLink, Placement
 from arboretum_library.descriptors import describe
 from arboretum_library.errors import ValidationError
 from arboretum_library.geometry import axis_angle_matrix, make_transform
-from arboretum_library.model import (
-    HBL,
-    Assembly,
-    Branch,
-    Example,
-    Level,
-    Lobe,
-    MergeLink,
-    Placement,
-    Provenance,
-)
+from arboretum_library.model import HBL, Branch, Example, Level, Lobe, Provenance
 
 TETRA_V = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]]
 TETRA_F = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]

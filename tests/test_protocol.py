@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from arboretum_library import protocol as P
+from arboretum_library.assembly import Assembly, Placement
 from arboretum_library.errors import ProtocolError
-from arboretum_library.model import Assembly, Placement
 from arboretum_library.wire import PROTOCOL_VERSION, Message, encode
 from factories import make_example, make_hbl
 

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from arboretum_library import protocol as P
+from arboretum_library.assembly import Assembly, LobeTransform, Placement
 from arboretum_library.cli import main
 from arboretum_library.codec import (
     arrays_to_npz,
@@ -24,7 +25,6 @@ from arboretum_library.codec import (
 )
 from arboretum_library.errors import InputError, ProtocolError, ValidationError
 from arboretum_library.geometry import make_transform
-from arboretum_library.model import Assembly, LobeTransform, Placement
 from arboretum_server.assembly import state
 from arboretum_server.assembly.state import Autosave, History
 from arboretum_server.service.context import Context

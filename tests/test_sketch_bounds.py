@@ -11,17 +11,10 @@ import numpy as np
 import pytest
 
 from arboretum_library import protocol as P
+from arboretum_library.assembly import MAX_OFFSET, MAX_SKETCH_COORDINATE, Assembly, Placement
 from arboretum_library.codec import load_record, save_record
 from arboretum_library.errors import InputError, ProtocolError, ValidationError
-from arboretum_library.model import (
-    HBL,
-    MAX_OFFSET,
-    MAX_SKETCH_COORDINATE,
-    Assembly,
-    Example,
-    Lobe,
-    Placement,
-)
+from arboretum_library.model import HBL, Example, Lobe
 from arboretum_server.service.context import Context
 from arboretum_server.service.dispatch import Dispatcher, error_reply
 from arboretum_server.service.sessions import Sessions

@@ -140,8 +140,8 @@ def test_assemble_names_a_missing_or_folder_script(tmp_path):
 def test_grow_and_modules_read_an_assembly_against_a_library_whose_catalog_is_damaged(lib_path, tmp_path):
     """``world.load_structure`` (what ``grow`` and ``modules`` read) rebuilds a damaged catalog as the
     other readers do, and places the example it names."""
+    from arboretum_library.assembly import Assembly, Placement
     from arboretum_library.codec import save_record
-    from arboretum_library.model import Assembly, Placement
     from arboretum_server.assembly.world import load_structure
 
     record = tmp_path / "tree.npz"

@@ -11,7 +11,8 @@ import dataclasses
 
 import numpy as np
 
-from arboretum_library.model import HBL, Lobe, Placement
+from arboretum_library.assembly import Placement
+from arboretum_library.model import HBL, Lobe
 
 
 def about_centre(T: np.ndarray, centre: np.ndarray, points: np.ndarray) -> np.ndarray:

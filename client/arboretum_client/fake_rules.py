@@ -9,18 +9,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from arboretum_library.assembly import Assembly, MergeLink, Placement
 from arboretum_library.descriptors import describe, tags_for
 from arboretum_library.errors import InputError
-from arboretum_library.model import (
-    HBL,
-    Assembly,
-    Branch,
-    Example,
-    Level,
-    MergeLink,
-    Placement,
-    Provenance,
-)
+from arboretum_library.model import HBL, Branch, Example, Level, Provenance
 from arboretum_library.protocol import GrownTree
 
 from .assembly_view import placed_hbl

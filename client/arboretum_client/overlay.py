@@ -10,8 +10,8 @@ import dataclasses
 
 import numpy as np
 
+from arboretum_library.assembly import LobeTransform
 from arboretum_library.errors import ValidationError
-from arboretum_library.model import LobeTransform
 
 from .assembly_view import placed_hbl
 from .input.hands import HAND_COLORS, HandSample

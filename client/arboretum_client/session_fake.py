@@ -13,16 +13,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from arboretum_library.assembly import Assembly, LobeTransform, Placement
 from arboretum_library.descriptors import describe, tags_for
 from arboretum_library.errors import InputError
-from arboretum_library.model import (
-    HBL,
-    Assembly,
-    Example,
-    LobeTransform,
-    Placement,
-    Provenance,
-)
+from arboretum_library.model import HBL, Example, Provenance
 from arboretum_library.protocol import (
     Edit,
     ExportFile,

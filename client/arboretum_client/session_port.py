@@ -18,7 +18,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from arboretum_library.model import Assembly, Example
+from arboretum_library.assembly import Assembly
+from arboretum_library.model import Example
 from arboretum_library.protocol import (
     Edit,
     ExportFile,

@@ -11,7 +11,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from arboretum_library import protocol as P
-from arboretum_library.model import Assembly, Example
+from arboretum_library.assembly import Assembly
+from arboretum_library.model import Example
 
 from .session_port import ProgressFn, _no_progress, strokes_to_arrays
 

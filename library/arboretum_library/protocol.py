@@ -23,8 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import __version__
+from .assembly import Assembly
 from .errors import ProtocolError
-from .model import HBL, Assembly, Example
+from .model import HBL, Example
 from .protocol_base import MAX_STRING as MAX_STRING
 from .protocol_base import RECORDS as RECORDS
 from .protocol_base import REGISTRY as REGISTRY

@@ -19,9 +19,10 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from .assembly import Assembly
 from .codec import flatten, unflatten
 from .errors import ArboretumError, ProtocolError, ValidationError
-from .model import HBL, Assembly, Example
+from .model import HBL, Example
 from .wire import DEFAULT_LIMITS, PROTOCOL_VERSION, Limits, Message, decode, encode
 
 REGISTRY: dict[str, type["Msg"]] = {}

@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 
 from arboretum_client.net import Worker
+from arboretum_library.assembly import Assembly
 from arboretum_library.atomic import write_atomic
 from arboretum_library.codec import load_record, save_record
 from arboretum_library.errors import InputError
-from arboretum_library.model import Assembly
 from arboretum_library.protocol import Edit, RefineState, SessionAssembly
 
 from .state import REFINEMENT, ClientState

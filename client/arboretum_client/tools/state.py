@@ -11,7 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from arboretum_library.model import HBL, Assembly, Example
+from arboretum_library.assembly import Assembly
+from arboretum_library.model import HBL, Example
 from arboretum_library.protocol import GrownTree, RefineCloud
 
 MODELING, REFINEMENT = "modeling", "refinement"

@@ -104,8 +104,8 @@ def open_library(path: str | Path):
 def run(args: argparse.Namespace) -> int:
     import tempfile
 
+    from arboretum_library.assembly import Assembly
     from arboretum_library.codec import load_record, save_record
-    from arboretum_library.model import Assembly
     from arboretum_library.outputs import check_output
     from arboretum_library.progress import StatusLine
 

@@ -13,8 +13,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from arboretum_library.assembly import Assembly, LobeTransform, Placement
 from arboretum_library.errors import InputError, ValidationError
-from arboretum_library.model import Assembly, LobeTransform, Placement
 
 from .recombine import RecombineOptions, recombine
 from .sketch import SketchOptions, sketch_example

@@ -14,8 +14,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from arboretum_library.assembly import Assembly, MergeLink
 from arboretum_library.geometry import point_polyline_distance, polyline_lengths, resample_polyline
-from arboretum_library.model import Assembly, MergeLink
 
 from .world import ExampleSource, main_world
 

@@ -21,9 +21,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from arboretum_library import protocol as P
+from arboretum_library.assembly import Assembly, Placement
 from arboretum_library.errors import ArboretumError, InputError
 from arboretum_library.geometry import make_transform
-from arboretum_library.model import Assembly, Placement
 
 from .script_check import Op, Pose
 

@@ -19,9 +19,9 @@ from typing import Any
 
 import numpy as np
 
+from arboretum_library.assembly import MAX_OFFSET, MAX_SCALE, MIN_SCALE, LobeTransform, Placement
 from arboretum_library.errors import InputError, ValidationError
 from arboretum_library.geometry import axis_angle_matrix
-from arboretum_library.model import MAX_OFFSET, MAX_SCALE, MIN_SCALE, LobeTransform, Placement
 
 from .script_values import MAX_INT, name, number, options_of, show, strokes, vector, whole
 

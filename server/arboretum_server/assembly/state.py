@@ -25,9 +25,9 @@ from pathlib import Path
 import msgpack
 import numpy as np
 
+from arboretum_library.assembly import Assembly
 from arboretum_library.codec import flatten, fsync_dir, load_record, save_record, unflatten
 from arboretum_library.errors import InputError
-from arboretum_library.model import Assembly
 
 log = logging.getLogger("arboretum.sessions")
 MAX_STEPS = 200

@@ -14,9 +14,10 @@ from collections.abc import Callable
 
 import numpy as np
 
+from arboretum_library.assembly import Assembly, Placement
 from arboretum_library.errors import InputError
 from arboretum_library.geometry import apply_transform, polyline_lengths
-from arboretum_library.model import HBL, Assembly, Branch, Example, Level, Lobe, Placement
+from arboretum_library.model import HBL, Branch, Example, Level, Lobe
 
 ExampleSource = Callable[[str], Example]
 """Example id -> Example (library examples and the assembly's sketches)."""

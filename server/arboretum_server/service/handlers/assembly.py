@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from arboretum_library import protocol as P
+from arboretum_library.assembly import MAX_OFFSET
 from arboretum_library.errors import InputError
-from arboretum_library.model import MAX_OFFSET
 from arboretum_server.assembly import ops
 from arboretum_server.assembly.sketch import recognise
 from arboretum_server.service.context import Context

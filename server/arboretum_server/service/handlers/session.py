@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from arboretum_library import protocol as P
+from arboretum_library.assembly import Assembly
 from arboretum_library.errors import InputError
-from arboretum_library.model import Assembly
 from arboretum_server.assembly.state import History
 from arboretum_server.assembly.world import assembly_to_hbl, resolver
 from arboretum_server.service.context import Context
