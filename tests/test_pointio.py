@@ -129,7 +129,7 @@ def test_text_with_header_rgb255_and_label(tmp_path, tree, attrs):
     ]
     path = tmp_path / "scan.csv"
     path.write_text(
-        "# exported by a scanner\nX,Y,Z,R,G,B,Classification\n" + "\n".join(rows) + "\n"
+        "# exported by a scanner\nX,Y,Z,R,G,B,Label\n" + "\n".join(rows) + "\n"
     )
     cloud = read_points(path, Z)
     np.testing.assert_allclose(cloud.points, tree, atol=1e-6)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from importlib.metadata import entry_points
 from typing import Any
@@ -68,17 +69,30 @@ def add_json_flag(parser: argparse.ArgumentParser) -> None:
 
 
 def emit(args: argparse.Namespace, data: Any, text: str) -> None:
-    """Print ``data`` as JSON when ``--json`` was given, else the human ``text``."""
+    """Print ``data`` as JSON when ``--json`` was given, else the human ``text``.
+
+    The JSON is always strict (RFC 8259), so every parser reads it: a non-finite number (NaN,
+    Infinity), which JSON cannot express and Python's ``json`` would print as the bare words ``NaN`` /
+    ``Infinity``, is printed as ``null``, as JavaScript's ``JSON.stringify`` does. numpy arrays and
+    scalars become lists and numbers; any other object its ``str``.
+    """
     if getattr(args, "json", False):
-        print(json.dumps(data, indent=2, sort_keys=True, default=_json_default))
+        print(json.dumps(_strict(data), indent=2, sort_keys=True, allow_nan=False, default=str))
     else:
         print(text)
 
 
-def _json_default(o: Any) -> Any:
-    if hasattr(o, "tolist"):
-        return o.tolist()
-    return str(o)
+def _strict(o: Any) -> Any:
+    """``o`` with numpy values as Python ones and non-finite floats as None, in nested dicts/lists."""
+    if hasattr(o, "tolist") and not isinstance(o, (str, bytes)):
+        o = o.tolist()  # numpy arrays and scalars
+    if isinstance(o, float):
+        return o if math.isfinite(o) else None
+    if isinstance(o, dict):
+        return {k: _strict(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_strict(v) for v in o]
+    return o
 
 
 def main(argv: list[str] | None = None) -> int:

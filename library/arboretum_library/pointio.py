@@ -25,7 +25,13 @@ from .errors import InputError, ValidationError
 from .geometry import yup_to_zup, zup_to_yup
 from .model import LEAF, frozen_array
 from .pointio_pcd import read_pcd
-from .pointio_spatial import even_sample_indices, guess_up_axis, median_spacing, trunk_base
+from .pointio_spatial import (
+    column_bounds,
+    even_sample_indices,
+    guess_up_axis,
+    median_spacing,
+    trunk_base,
+)
 
 __all__ = [
     "PointCloud",
@@ -127,6 +133,11 @@ class ReadOptions:
             raise InputError(f"max points must be at least 2, got {self.max_points}")
 
 
+MAX_COORDINATE = 1e12
+"""Largest coordinate magnitude ``read_points`` accepts, in any unit (the limit of ``arboretum
+decompose``, ``decompose.preprocess.MAX_COORDINATE``): geocentric coordinates in millimetres stay under
+1e10, while near 1e154 squared distances, and near 1e308 extents, overflow float64."""
+
 AUTO_Y_CONFIDENCE = 0.75
 """With ``up='auto'`` a file is turned from Y up only when ``guess_up_axis`` says 'y' this surely."""
 
@@ -137,7 +148,8 @@ VRTREE_PREPROCESS = ReadOptions(recentre=True, target_height=0.8, max_points=12_
 def read_points(path: str | Path, options: ReadOptions = ReadOptions()) -> PointCloud:
     """Read a point cloud file into a Z-up ``PointCloud``, prepared as ``options`` asks.
 
-    Steps: read, check (points finite, at least two, not all identical), up axis, thin
+    Steps: read, check (points finite and within ``MAX_COORDINATE``, at least two, not all
+    identical), up axis, thin
     (``max_points``), recentre, scale. Colours, labels and branch ids follow the kept points.
     Raises ``InputError`` naming ``path`` for anything wrong with the file.
     """
@@ -199,6 +211,12 @@ def _checked_points(path: Path, raw: fmt.Raw) -> np.ndarray:
         raise InputError(
             f"'{path}': {int(bad.sum())} point(s) have NaN or infinite coordinates"
             f" (first at index {int(np.argmax(bad))})"
+        )
+    big = float(np.abs(column_bounds(points)).max())
+    if big > MAX_COORDINATE:
+        raise InputError(
+            f"'{path}': coordinates up to {big:.3g}, beyond {MAX_COORDINATE:.0e} in any unit;"
+            " a file read in the wrong format or units?"
         )
     if len(points) == 1:
         raise InputError(f"'{path}': holds exactly one point; a tree needs many")
@@ -281,7 +299,7 @@ def scan_stats(cloud: PointCloud, seed: int = 0) -> dict[str, Any]:
     ``spacing`` is the median nearest-neighbour distance over up to 2,000 sampled points (metres).
     """
     pts = cloud.points
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    lo, hi = column_bounds(pts)
     file_frame = zup_to_yup(pts) if cloud.up_axis == "y" else pts
     guess, confidence = guess_up_axis(file_frame)
     stats: dict[str, Any] = {

@@ -19,7 +19,13 @@ from .errors import InputError
 
 Raw = dict[str, Any]
 
-LABEL_NAMES = ("label", "labels", "classification", "class")
+LABEL_NAMES = ("label", "labels")
+"""Columns holding our labels, 0 (wood) or 1 (leaf)."""
+CLASS_NAMES = ("classification", "class")
+"""Columns holding classes of another scheme (ASPRS LAS classes: 1 unassigned, 2 ground, 5 high
+vegetation...): ignored in every format, as LAS classification is. Read as labels they refused a
+classified CSV (class 5 is no label), and a column of 0 (never classified) and 1 (unassigned) would
+have passed as wood and leaf."""
 BRANCH_NAMES = ("branch_id", "branch_ids", "branchid", "branch")
 COLOR_NAMES = (
     ("red", "green", "blue"),
@@ -57,7 +63,8 @@ def from_named(path: Path, columns: dict[str, np.ndarray]) -> Raw:
     raw: Raw = {"points": np.stack([np.asarray(cols[k], np.float64) for k in "xyz"], axis=1)}
     for names in COLOR_NAMES:
         if all(n in cols for n in names):
-            is_u16 = np.asarray(cols[names[0]]).dtype == np.uint16
+            kind = np.asarray(cols[names[0]]).dtype
+            is_u16 = kind.kind == "u" and kind.itemsize == 2  # either byte order
             rgb = np.stack([cols[n] for n in names], axis=1)
             raw["colors"] = scale_colors(rgb, 65535.0 if is_u16 else None)
             break
@@ -97,7 +104,7 @@ def from_table(
     raw: Raw = {"points": table[:, :3]}
     if names is not None and len(names) == table.shape[1] and all(k in names for k in "xyz"):
         raw = from_named(path, dict(zip(names, table.T)))
-        claimed = set(LABEL_NAMES + BRANCH_NAMES + ("x", "y", "z"))
+        claimed = set(LABEL_NAMES + CLASS_NAMES + BRANCH_NAMES + ("x", "y", "z"))
         if "colors" in raw or claimed & set(names[rgb_at : rgb_at + 3]):
             return raw
     if table.shape[1] >= rgb_at + 3:
@@ -126,32 +133,55 @@ def read_text(path: Path) -> Raw:
 
     A first numeric line holding one number (the point count of Leica .pts files) is skipped. In a
     7-column .pts file (x y z intensity r g b) the colours are columns 4-6, otherwise columns 3-5.
+    Only the first lines are held as lines; the data are streamed into numpy's parser.
     """
-    data = path.read_bytes()
-    lines = data.removeprefix(b"\xef\xbb\xbf").splitlines()
-    names, start = None, None
-    for i, line in enumerate(lines[:MAX_HEADER_LINES]):
-        s = line.strip()
-        if not s or s.startswith(b"#"):
-            continue
-        tokens = [t for t in re.split(rb"[,;\s]+", s) if t]
-        if all(_is_number(t) for t in tokens):
-            start = i + 1 if len(tokens) == 1 and i + 1 < len(lines) else i
-            break
-        names = _header_names(s)
-    if start is None:
-        what = (
-            "no numeric rows in its first 100 lines"
-            if len(lines) > MAX_HEADER_LINES
-            else "no points"
-        )
-        raise fail(path, f"holds {what}")
-    reason = not_points_reason(names)
-    if reason:
-        raise fail(path, reason)
-    table = parse_table(path, lines[start:], start + 1)
+    with open(path, "rb") as f:
+        lines, whole = head_lines(f, MAX_HEADER_LINES + 1)
+        bom = len(UTF8_BOM) if lines and lines[0].startswith(UTF8_BOM) else 0
+        if bom:
+            lines[0] = lines[0][bom:]
+        names, start = None, None
+        for i, line in enumerate(lines[:MAX_HEADER_LINES]):
+            s = line.strip()
+            if not s or s.startswith(b"#"):
+                continue
+            tokens = [t for t in re.split(rb"[,;\s]+", s) if t]
+            if all(_is_number(t) for t in tokens):
+                start = i + 1 if len(tokens) == 1 and i + 1 < len(lines) else i
+                break
+            names = _header_names(s)
+        if start is None:
+            many = len(lines) > MAX_HEADER_LINES or not whole
+            raise fail(path, f"holds {'no numeric rows in its first 100 lines' if many else 'no points'}")
+        reason = not_points_reason(names)
+        if reason:
+            raise fail(path, reason)
+        f.seek(bom + sum(len(ln) for ln in lines[:start]))
+        table = parse_table(path, f, start + 1)
     rgb_at = 4 if path.suffix.lower() == ".pts" and table.shape[1] == 7 else 3
     return from_table(path, table, names, rgb_at)
+
+
+UTF8_BOM = b"\xef\xbb\xbf"
+HEAD_BYTES = 1 << 16
+"""Bytes ``head_lines`` reads at first (it reads more while it has too few lines)."""
+
+
+def head_lines(f: BinaryIO, count: int) -> tuple[list[bytes], bool]:
+    """Up to the first ``count`` complete lines of ``f`` from where it stands, with their line ends,
+    and whether they are all its lines. Leaves ``f`` where it was."""
+    begin, data = f.tell(), b""
+    while True:
+        size = max(HEAD_BYTES, len(data))
+        chunk = f.read(size)
+        data, whole = data + chunk, len(chunk) < size
+        lines = data.splitlines(keepends=True)
+        if whole or len(lines) > count:
+            break
+    f.seek(begin)
+    if not whole:
+        lines = lines[:-1]  # may be cut short (or a \r\n cut in two)
+    return lines[:count], whole and len(lines) <= count
 
 
 CYLINDER_COLUMNS = ("start_x", "axis_x", "length", "radius")
@@ -199,32 +229,49 @@ def sniff_not_points(path: Path, limit: int = 65536) -> str | None:
     return None
 
 
-def parse_table(path: Path, lines: list[bytes], first_line: int) -> np.ndarray:
-    """Numbers of ``lines`` (the first is line ``first_line``) as an (R, C>=3) float64 table.
+def parse_table(path: Path, f: BinaryIO, first_line: int) -> np.ndarray:
+    """The numbers of ``f`` from where it stands (that is line ``first_line``) as an (R, C>=3) float64
+    table.
 
-    numpy's C parser (``np.loadtxt``) reads well-formed data; anything it refuses is parsed again line
-    by line to say what is wrong where. Rows with NaN or infinite values are refused with their line.
+    numpy's C parser (``np.loadtxt``) streams well-formed data, with the delimiter of the first rows;
+    anything it refuses is read whole and parsed again with commas and semicolons as spaces, then if
+    need be line by line to say what is wrong where. Rows with NaN or infinite values are refused with
+    their line.
     """
-    body = b"\n".join(lines)
-    if b"," in body:
-        _refuse_decimal_commas(path, lines, first_line)
-    delimiter = "," if b"," in body else ";" if b";" in body else None
-    try:
-        with warnings.catch_warnings():  # "input contained no data": said below, as an InputError
-            warnings.simplefilter("ignore", UserWarning)
-            table = np.loadtxt(io.BytesIO(body), delimiter=delimiter, ndmin=2)
-    except ValueError:
-        table = np.zeros((0, 0))
+    begin = f.tell()
+    rows = [r.split(b"#", 1)[0] for r in head_lines(f, 4 * ROWS_CHECKED)[0]]
+    _refuse_decimal_commas(path, rows, first_line)
+    sample = b"".join(rows)
+    table = _loadtxt(f, "," if b"," in sample else ";" if b";" in sample else None)
     if table.shape[1] < 3 or not len(table):
-        table = _parse_carefully(path, _rows(body), first_line)
+        f.seek(begin)
+        body = f.read()
+        table = _loadtxt(io.BytesIO(body.replace(b",", b" ").replace(b";", b" ")), None)
+        if table.shape[1] < 3 or not len(table):
+            table = _parse_carefully(path, _rows(body), first_line)
     bad = ~np.isfinite(table).all(axis=1)
     if bad.any():
-        numbers = [first_line + i for i, r in enumerate(_rows(body)) if r.strip()]
+        f.seek(begin)
+        numbers = [first_line + i for i, r in enumerate(_rows(f.read())) if r.strip()]
         raise fail(
             path,
             f"{int(bad.sum())} point(s) have NaN or infinite values (first on line {numbers[int(np.argmax(bad))]})",
         )
     return table
+
+
+def _loadtxt(f: BinaryIO, delimiter: str | None) -> np.ndarray:
+    """``np.loadtxt`` of a binary stream (numbers are ASCII: latin-1 decodes any byte), or an empty
+    (0, 0) table when it refuses the data."""
+    text = io.TextIOWrapper(f, encoding="latin-1")
+    try:
+        with warnings.catch_warnings():  # "input contained no data": said by the caller, as an InputError
+            warnings.simplefilter("ignore", UserWarning)
+            return np.loadtxt(text, delimiter=delimiter, ndmin=2)
+    except ValueError:
+        return np.zeros((0, 0))
+    finally:
+        text.detach()  # leave ``f`` open
 
 
 DECIMAL_COMMA = re.compile(rb"[-+]?\d+,\d+(?:[eE][-+]?\d+)?")
@@ -256,7 +303,7 @@ def _rows(body: bytes) -> list[bytes]:
     """The lines of ``body`` with delimiters turned to spaces and ``#`` comments removed."""
     if b"," in body or b";" in body:
         body = body.replace(b",", b" ").replace(b";", b" ")
-    rows = body.split(b"\n")
+    rows = body.splitlines()
     return [r.split(b"#", 1)[0] for r in rows] if b"#" in body else rows
 
 
@@ -293,13 +340,21 @@ def _parse_carefully(path: Path, rows: list[bytes], first_line: int) -> np.ndarr
 
 
 def read_ply(path: Path) -> Raw:
+    """The vertex element of an ascii or binary PLY file (``from_named``: x y z, colours, labels...).
+
+    Binary elements without list properties are memory-mapped by plyfile (copy-on-write; where the
+    file system cannot map files plyfile reads them instead): about 250 times faster than its
+    row-by-row reading. The columns are copied out and the mapping dropped before the file is closed,
+    so nothing keeps the file open or mapped afterwards (Windows could neither replace nor delete it).
+    """
     from plyfile import PlyData
 
     try:
         with open(path, "rb") as f:
-            ply = PlyData.read(f, mmap="")  # falsy: no memory map
-        vertex = ply["vertex"]
-        columns = {p.name: np.asarray(vertex[p.name]) for p in vertex.properties}
+            ply = PlyData.read(f, mmap="c")
+            vertex = ply["vertex"]
+            columns = {p.name: np.array(vertex[p.name]) for p in vertex.properties}
+            del ply, vertex  # the memory map goes with its last array
     except KeyError:
         raise fail(path, "has no 'vertex' element") from None
     except Exception as exc:  # plyfile raises many types for a corrupt file
@@ -324,14 +379,31 @@ def read_las(path: Path) -> Raw:
     dims = set(las.point_format.dimension_names)
     if {"red", "green", "blue"} <= dims:
         rgb = np.stack([np.asarray(las[c]) for c in ("red", "green", "blue")], axis=1)
-        raw["colors"] = scale_colors(rgb, 65535.0)
+        # a point format with RGB fields whose values are all 0 holds no colours (writers fill them
+        # with zeros): read as colours, such a scan would turn black
+        if rgb.size and rgb.max() > 0:
+            raw["colors"] = scale_colors(rgb, 65535.0)
     return raw
 
 
+NPY_MAGIC = b"\x93NUMPY"
+ZIP_MAGIC = b"PK\x03\x04"
+
+
 def read_npy(path: Path) -> Raw:
+    with open(path, "rb") as f:
+        magic = f.read(len(NPY_MAGIC))
+    if magic.startswith(ZIP_MAGIC):
+        raise fail(path, "is a zip archive (an .npz file?), not an .npy array")
+    if magic != NPY_MAGIC:
+        if _looks_like_text(path):
+            raise fail(path, "is a text file, not an .npy array (a table of numbers? name it .xyz)")
+        raise fail(path, "is not an .npy array (it does not start with numpy's .npy header)")
     try:
         arr = np.load(path, allow_pickle=False)
-    except Exception as exc:  # truncated, not an .npy, or an object array
+    except Exception as exc:  # truncated, or an object array
+        if "allow_pickle" in str(exc):  # numpy's advice would be to run the file's code: never
+            raise fail(path, "is an .npy array of Python objects, not of numbers") from None
         raise fail(path, f"is not a readable .npy array ({_short(exc)})") from None
     if arr.dtype.names:
         return from_named(path, {n: arr[n] for n in arr.dtype.names})
@@ -340,6 +412,13 @@ def read_npy(path: Path) -> Raw:
     if arr.shape[1] < 3:
         raise fail(path, f"has {arr.shape[1]} column(s); x, y and z need at least 3")
     return from_table(path, arr.astype(np.float64))
+
+
+def _looks_like_text(path: Path, limit: int = 4096) -> bool:
+    """Whether the first ``limit`` bytes of ``path`` are printable ASCII text."""
+    with open(path, "rb") as f:
+        head = f.read(limit)
+    return bool(head) and not head.translate(None, bytes(range(32, 127)) + b"\t\r\n")
 
 
 def _short(exc: Exception) -> str:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import struct
 from pathlib import Path
 from typing import Any
@@ -154,10 +155,8 @@ def lzf_decompress(src: bytes, size: int) -> bytes:
 
 
 def read_text_table(path: Path, data: bytes, first_line: int) -> np.ndarray:
-    lines = data.splitlines()
-    if not any(ln.strip() for ln in lines):
-        raise fail(path, "holds no points")
-    return parse_table(path, lines, first_line + 1)
+    """The ascii data rows ``data`` (after ``first_line`` header lines) as an (R, C>=3) table."""
+    return parse_table(path, io.BytesIO(data), first_line + 1)
 
 
 def _pcd_raw(path: Path, columns: dict[str, Any]) -> Raw:
