@@ -110,6 +110,7 @@ CASES = [
     ("member not .npy", _zip({"a.txt": b"hello"}), None, "'a.txt' is not an array"),
     ("npy magic flipped", _zip({"a.npy": b"C" + _npy(_header("(3,)"))[1:]}), None, "'a' is not an array"),
     ("a bare .npy", _npy(_header("(3,)")), None, "one .npy array"),
+    ("a text file", b"0.1 0.2 0.3\n1 2 3\n", None, "not a zip archive"),
 ]
 
 

@@ -145,6 +145,11 @@ _ENCRYPTED = 0x1
 def npz_to_arrays(data: bytes | io.BufferedIOBase, where: str = "npz") -> dict[str, np.ndarray]:
     """Read every array of an .npz, refusing pickled object arrays; ``ValidationError`` if it is damaged."""
     src = io.BytesIO(data) if isinstance(data, bytes) else data
+    head = src.read(6)
+    src.seek(-len(head), io.SEEK_CUR)
+    if head and not head.startswith(b"PK"):  # not a zip: numpy's own message would advise allow_pickle
+        what = "one .npy array, not a zip of arrays" if head == b"\x93NUMPY" else "not a zip archive"
+        raise ValidationError(f"{where}: not a readable .npz ({what})")
     try:
         loaded = np.load(src, allow_pickle=False)
         if not isinstance(loaded, np.lib.npyio.NpzFile):  # a bare .npy array

@@ -129,7 +129,7 @@ def _waiting_on_stderr():
 
 
 def _text(d: dict) -> str:
-    from .report import counted
+    from arboretum_library.cli import counted
 
     redone = f"; {d['redone']} of them done again: --rebuild, or damaged" if d.get("redone") else ""
     lines = [f"{d['library']}: {counted(d['added'], 'scan')} added ({counted(d['examples_added'], 'example')}{redone}), "

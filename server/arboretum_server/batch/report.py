@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from arboretum_library.cli import counted
+
 from .build import BuildResult
 
 OK, FAILED = (44, 110, 180), (214, 39, 40)
@@ -99,11 +101,6 @@ def _png(img) -> bytes:
     buf = io.BytesIO()
     img.save(buf, format="PNG", compress_level=1)
     return buf.getvalue()
-
-
-def counted(n: int, word: str) -> str:
-    """``n`` and ``word``, plural unless ``n`` is 1: "1 scan", "2 scans", "0 workers"."""
-    return f"{n} {word}{'' if n == 1 else 's'}"
 
 
 def markdown(data: dict[str, Any], plots: dict[str, str]) -> str:

@@ -18,7 +18,7 @@ import time
 from contextlib import contextmanager
 
 from arboretum_library.checks import check_seed
-from arboretum_library.cli import add_json_flag, emit, tell
+from arboretum_library.cli import add_json_flag, counted, emit, tell
 
 UP_CHOICES = ("auto", "z", "y")
 
@@ -190,7 +190,7 @@ def _text(d: dict) -> str:
     lines = [
         f"{d['scan']}: {d['points_read']} points read, {s['points']} used, {s['leaf_points']} leaf, "
         f"{s['ground_removed']} ground removed",
-        f"graph: {s['components']} components joined by {s['bridges']} bridges",
+        f"graph: {counted(s['components'], 'component')} joined by {counted(s['bridges'], 'bridge')}",
         f"HBL: {s['main_branches']} main branches, {s['lobes']} lobes ({s['alpha_shapes']} alpha shapes, "
         f"{s['hull_fallbacks']} convex fallbacks), foliage from {s['foliage_source']}",
         f"time: {steps} (total {sum(d['timing_s'].values()):.2f} s)",
