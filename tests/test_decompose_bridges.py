@@ -64,3 +64,19 @@ def test_the_graph_is_the_one_the_reference_bridging_gives(rng, monkeypatch):
     ref = knn_graph(pts, 5, 0.05)
     assert g.components == ref.components > 500  # a full-resolution toy scan: hundreds of pieces
     assert (g.adjacency != ref.adjacency).nnz == 0
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_straight_pole_in_runs_is_bridged(seed, monkeypatch):
+    # 12 exactly collinear runs of 20 points with 4 cm gaps: each run's extreme point is a corner of
+    # its box, so the bound's outsider lies exactly on the search sphere (a crash before the padding)
+    rng = np.random.default_rng(seed)
+    d = np.array([rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2), 1.0])
+    d /= np.linalg.norm(d)
+    runs = np.concatenate([k * 0.08 + np.arange(20) * 0.002 for k in range(12)])
+    pts = rng.uniform(-0.1, 0.1, 3) + runs[:, None] * d
+    g = knn_graph(pts, 5, 0.03)
+    assert g.components == 12 and g.bridges == 11
+    monkeypatch.setattr(graph, "_nearest_pair", nearest_pair_reference)
+    ref = knn_graph(pts, 5, 0.03)
+    np.testing.assert_allclose(np.sort(g.adjacency.data), np.sort(ref.adjacency.data), rtol=1e-12)

@@ -33,3 +33,12 @@ def test_library_import_into_a_folder_of_another_library_is_one_line(tmp_path, c
     err = capsys.readouterr().err
     assert code == 2 and "lies inside the library" in err and "Traceback" not in err
     assert not (outer / "examples" / "new").exists()
+
+
+def test_another_tools_library_json_above_is_no_library(tmp_path):
+    proj = tmp_path / "proj"
+    proj.mkdir()
+    (proj / "library.json").write_text('{"name": "my-firmware", "version": "1.0.0"}')  # PlatformIO
+    assert enclosing_library(proj / "trees" / "lib") is None
+    Library.open(proj / "trees" / "lib", create=True)
+    assert (proj / "trees" / "lib" / "library.json").is_file()

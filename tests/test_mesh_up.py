@@ -110,9 +110,9 @@ def test_modules_passes_up_to_its_crown(files, monkeypatch, tmp_path, capsys):
 
     real = meshio.load_mesh
 
-    def stop(path, what="module mesh", up="auto"):
+    def stop(path, what="module mesh", up="auto", guess=True):
         if what != "--crown":
-            return real(path, what, up)  # the bundled module meshes
+            return real(path, what, up, guess)  # the bundled module meshes
         seen.append(up)
         raise InputError("stop here")
 
@@ -121,3 +121,32 @@ def test_modules_passes_up_to_its_crown(files, monkeypatch, tmp_path, capsys):
         argv = ["modules", "--crown", str(files["obj_z"]), "--out", str(tmp_path / "m.glb")]
         assert main(argv + (["--up", up] if up != "auto" else [])) == 2
     assert seen == ["auto", "z"] and "stop here" in capsys.readouterr().err
+
+
+def test_arboretums_own_ply_is_z_up_whatever_its_shape(tmp_path):
+    # a row of five trees along Y, written by our PLY writer: wider along Y than tall, which the
+    # shape test alone would read as a tree lying along Y
+    from arboretum_library.export.parts import MeshPart
+    from arboretum_library.export.ply import write_mesh_ply
+
+    tree = _tree_zup()
+    row = trimesh.util.concatenate([tree.copy().apply_translation([0, 8.0 * i, 0]) for i in range(5)])
+    v = np.asarray(row.vertices)
+    part = MeshPart(name="row", positions=v, faces=np.asarray(row.faces))
+    path = tmp_path / "row.ply"
+    write_mesh_ply(path, [part])
+    assert mesh_up_axis(path, v) == "z"
+    headerless = tmp_path / "row_other.ply"
+    trimesh.Trimesh(v, row.faces, process=False).export(headerless)
+    assert mesh_up_axis(headerless, v) == "y"  # without our comment the shape decides (documented)
+
+
+def test_module_meshes_are_never_guessed(tmp_path):
+    # a leaf card lying in the XZ plane of a headerless OBJ (Y up): read Y up, not guessed
+    card = np.array([[0, 0, 0], [0.05, 0, 0], [0.05, 0, 0.12], [0, 0, 0.12]], float)
+    verts = np.vstack([card + [0, 0.001 * i, 0] for i in range(3)])
+    faces = np.vstack([[4 * i, 4 * i + 1, 4 * i + 2] for i in range(3)] + [[4 * i, 4 * i + 2, 4 * i + 3] for i in range(3)])
+    path = _write_obj(tmp_path / "leaf.obj", verts, faces)
+    assert mesh_up_axis(path, verts, guess=False) == "y"
+    v, _ = load_mesh(path, guess=False)
+    np.testing.assert_allclose(np.ptp(v, axis=0)[1], 0.12, atol=1e-6)  # the card's length lies along -Y

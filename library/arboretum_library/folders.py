@@ -175,12 +175,21 @@ def check_marker(root: Path, create: bool) -> None:
 
 
 def enclosing_library(path: Path) -> Path | None:
-    """The nearest folder above ``path`` (links resolved) holding a ``library.json``, or None."""
+    """The nearest folder above ``path`` (links resolved) holding an Arboretum ``library.json`` (one
+    with our format marker: other tools, e.g. PlatformIO, write files of that name too), or None."""
     try:
         parents = Path(path).resolve().parents
     except (OSError, RuntimeError):  # a link loop
         return None
-    return next((p for p in parents if (p / "library.json").is_file()), None)
+    return next((p for p in parents if _is_marker(p / "library.json")), None)
+
+
+def _is_marker(path: Path) -> bool:
+    try:
+        head = json.loads(path.read_bytes()[:65536])
+    except (OSError, ValueError):  # missing, a folder, unreadable, not JSON
+        return False
+    return isinstance(head, dict) and head.get("format") == LIBRARY_FORMAT
 
 
 def safe_prefix(text: str) -> str:

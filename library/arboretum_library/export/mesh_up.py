@@ -2,8 +2,8 @@
 ``modules --crown``.
 
 glTF is Y up by definition. OBJ and PLY do not say: Arboretum's OBJ names its axis on its first line
-(``obj.obj_up_axis``), and a PLY is Z up as Arboretum, scanners and photogrammetry tools write it. For
-a file without Arboretum's header, ``auto`` keeps the format's usual axis (OBJ Y, as Blender and Maya
+(``obj.obj_header_axis``) and its PLY in a header comment (``ply_header_axis``), and a PLY is Z up as
+Arboretum, scanners and photogrammetry tools write it. For a file without Arboretum's header, ``auto`` keeps the format's usual axis (OBJ Y, as Blender and Maya
 write it; PLY Z) unless the vertices stand along the other one surely: the same test as a point
 cloud's ``--up auto`` (``pointio_spatial.guess_up_axis``, confidence >= 0.75), so a tree exported Z up
 from 3ds Max or a GIS tool is read upright. An explicit ``y`` or ``z`` always wins.
@@ -12,6 +12,7 @@ from 3ds Max or a GIS tool is read upright. An explicit ``y`` or ``z`` always wi
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -28,11 +29,27 @@ SURE = 0.75
 ``pointio.AUTO_Y_CONFIDENCE`` for point clouds)."""
 
 
-def mesh_up_axis(path: str | os.PathLike, vertices: np.ndarray, up: str = "auto", what: str = "INPUT") -> str:
+_PLY_HEADER = re.compile(r"comment arboretum\b.*\b([YZ]) up\b", re.IGNORECASE)
+
+
+def ply_header_axis(path: str | os.PathLike) -> str | None:
+    """'y' or 'z' when the PLY at ``path`` carries Arboretum's header comment (``export.ply`` writes
+    ``comment arboretum, Z up, metres``), else None. Reads the header only (at most 64 KiB)."""
+    with open(path, "rb") as f:
+        head = f.read(65536)
+    for line in head.split(b"end_header", 1)[0].decode("latin-1").splitlines():
+        if (found := _PLY_HEADER.match(line.strip())) is not None:
+            return found.group(1).lower()
+    return None
+
+
+def mesh_up_axis(path: str | os.PathLike, vertices: np.ndarray, up: str = "auto", what: str = "INPUT",
+                 guess: bool = True) -> str:
     """'y' or 'z': the up axis of the mesh file ``path`` whose vertices (V, 3) are ``vertices`` as stored.
 
     ``up`` is 'auto', 'y' or 'z' (see the module doc); 'y' or 'z' for a glTF file other than its own
-    'y' is an ``InputError`` naming ``what``.
+    'y' is an ``InputError`` naming ``what``. ``guess=False``: 'auto' never looks at the vertices (module
+    meshes, branch pieces and leaf cards, whose shape says nothing of their up axis).
     """
     if up not in UP_CHOICES:
         raise InputError(f"--up must be one of {', '.join(UP_CHOICES)}, got {up!r}")
@@ -45,10 +62,13 @@ def mesh_up_axis(path: str | os.PathLike, vertices: np.ndarray, up: str = "auto"
     if up != "auto":
         return up
     usual = "y" if suffix == ".obj" else "z"
-    if suffix == ".obj" and (header := obj_header_axis(path)) is not None:
+    header = obj_header_axis(path) if suffix == ".obj" else ply_header_axis(path) if suffix == ".ply" else None
+    if header is not None:
         return header
+    if not guess:
+        return usual
     v = np.asarray(vertices, np.float64).reshape(-1, 3)
     if len(v) < 8 or not np.isfinite(v).all():
         return usual
-    guess, confidence = guess_up_axis(v)
-    return guess if guess != usual and confidence >= SURE else usual
+    axis, confidence = guess_up_axis(v)
+    return axis if axis != usual and confidence >= SURE else usual

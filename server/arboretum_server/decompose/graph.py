@@ -158,7 +158,9 @@ def _nearest_pair(points, tree, inside, lab, c):
     An upper bound first: the nearest outsider of the component's six extreme points (each point's
     len(inside) + 1 nearest neighbours hold one). The true pair's outsider then lies within that bound
     of the component's bounding ball, so the outsiders in the ball, each asked for its nearest insider
-    (a KD-tree of the component), give the exact edge without a tree of every other point.
+    (a KD-tree of the component), give the shortest edge without a tree of every other point (the
+    shortest length exactly; where several edges tie, possibly another of them than
+    ``nearest_pair_reference`` picks).
     """
     own = points[inside]
     if 2 * len(inside) > len(points):  # most of the cloud: ask each outsider for its nearest insider
@@ -168,10 +170,17 @@ def _nearest_pair(points, tree, inside, lab, c):
         return inside[k[r : r + 1]], outside[r : r + 1], d[r : r + 1]
     ends = np.unique(np.r_[own.argmin(axis=0), own.argmax(axis=0)])
     d, j = tree.query(own[ends], k=min(len(points), len(inside) + 1))
-    bound = float(np.where(lab[j] != c, d, np.inf).min())
+    d = np.where(lab[j] != c, d, np.inf)
+    first = np.unravel_index(int(np.argmin(d)), d.shape)
+    bound, witness = float(d[first]), j[first]
     lo, hi = own.min(axis=0), own.max(axis=0)
-    near = np.asarray(tree.query_ball_point((lo + hi) / 2, float(np.linalg.norm(hi - lo)) / 2 + bound), np.int64)
-    near = near[lab[near] != c]
+    # the ball's radius padded by a few ulps of the coordinates: the KD-tree compares squared distances,
+    # so an outsider exactly on the sphere (a straight run, whose extreme point is a box corner) may
+    # fall just outside it; the bound's own outsider is always kept
+    reach = float(np.linalg.norm(hi - lo)) / 2 + bound
+    pad = 1e-9 * max(reach, float(np.abs(own).max()))
+    near = np.asarray(tree.query_ball_point((lo + hi) / 2, reach + pad), np.int64)
+    near = np.union1d(near[lab[near] != c], [witness])
     d, k = cKDTree(own).query(points[near])
     r = int(np.argmin(d))
     return inside[k[r : r + 1]], near[r : r + 1], d[r : r + 1]

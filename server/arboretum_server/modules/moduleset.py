@@ -93,7 +93,7 @@ def load_module_set(folder: str | Path) -> ModuleSet:
     files = sorted(p for p in folder.glob("*") if p.suffix.lower() in (".obj", ".glb", ".gltf"))
     if not files:
         raise InputError(f"module folder {folder}: no .obj/.glb/.gltf files")
-    modules = tuple(make_module(p.stem, *load_mesh(p)) for p in files)
+    modules = tuple(make_module(p.stem, *load_mesh(p, guess=False)) for p in files)  # pieces: no shape guess
     if not any(not m.is_trunk for m in modules):
         raise InputError(f"module folder {folder}: no branch modules (only trunk_* files)")
     return ModuleSet(modules)
