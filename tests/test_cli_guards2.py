@@ -19,7 +19,7 @@ from arboretum_library.cli import main
 from arboretum_library.codec import load_record
 from arboretum_library.errors import InputError
 from arboretum_library.pointio import read_points, write_points
-from arboretum_library.pointio_formats import sniff_not_points
+from arboretum_library.pointio_text import sniff_not_points
 from arboretum_library.store import Library
 from factories import make_example
 

@@ -5,7 +5,7 @@ Read: .xyz .txt .csv .asc .pts (text), .ply, .pcd (v0.7 ascii/binary/binary_comp
 back Z up in metres (Y-up files are turned with ``geometry.yup_to_zup``), optionally recentred on its
 trunk base, scaled to a height and thinned evenly to a number of points (VRTree section 4: 12,000 points,
 0.8 m). Every problem with a file raises one ``InputError`` naming it. The per-format code lives in
-``pointio_formats``; the spatial helpers (up axis, trunk base, even thinning, spacing) in ``pointio_spatial``.
+``pointio_formats`` (text tables in ``pointio_text``); the spatial helpers (up axis, trunk base, even thinning, spacing) in ``pointio_spatial``.
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ from .pointio_spatial import (
     median_spacing,
     trunk_base,
 )
+from .pointio_text import read_text
 
 __all__ = [
     "PointCloud",
@@ -49,11 +50,11 @@ __all__ = [
 ]
 
 READERS: dict[str, Callable[[Path], fmt.Raw]] = {
-    ".xyz": fmt.read_text,
-    ".txt": fmt.read_text,
-    ".csv": fmt.read_text,
-    ".asc": fmt.read_text,
-    ".pts": fmt.read_text,
+    ".xyz": read_text,
+    ".txt": read_text,
+    ".csv": read_text,
+    ".asc": read_text,
+    ".pts": read_text,
     ".ply": fmt.read_ply,
     ".pcd": read_pcd,
     ".las": fmt.read_las,

@@ -9,7 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from .pointio_formats import MAX_HEADER_LINES, Raw, fail, from_named, parse_table
+from .pointio_formats import MAX_HEADER_LINES, Raw, fail, from_named
+from .pointio_text import parse_table
 
 _PCD_TYPES = {"F": "f", "U": "u", "I": "i"}
 

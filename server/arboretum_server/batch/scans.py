@@ -6,7 +6,7 @@ from pathlib import Path
 
 from arboretum_library.errors import InputError
 from arboretum_library.pointio import READERS
-from arboretum_library.pointio_formats import sniff_not_points
+from arboretum_library.pointio_text import sniff_not_points
 
 
 def expand_scans(paths: list[str], ignored: list[tuple[str, str]] | None = None,

@@ -1,0 +1,241 @@
+"""Text point clouds (.xyz .txt .csv .asc .pts) behind ``pointio.read_points``: the header read from the
+first lines, the data streamed into ``np.loadtxt`` (a 5M-point file peaks near its own size, not 8x),
+and whatever ``loadtxt`` refuses re-read line by line so an error names its line. Also the sniffing
+that tells a point table from other tables (QSM cylinders) before a batch reads it.
+"""
+
+from __future__ import annotations
+
+import io
+import re
+import warnings
+from pathlib import Path
+from typing import BinaryIO
+
+import numpy as np
+
+from .pointio_formats import MAX_HEADER_LINES, Raw, fail, from_table
+
+
+def _is_number(token: bytes) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
+
+
+def _header_names(line: bytes) -> list[str]:
+    text = line.decode("utf-8", "replace").strip().lstrip("/#").strip()
+    return [t.strip("\"' ").lower() for t in re.split(r"[,;\s]+", text) if t.strip("\"' ")]
+
+
+def read_text(path: Path) -> Raw:
+    """Whitespace-, comma- or semicolon-separated rows; non-numeric lines before the data are a header.
+
+    A first numeric line holding one number (the point count of Leica .pts files) is skipped. In a
+    7-column .pts file (x y z intensity r g b) the colours are columns 4-6, otherwise columns 3-5.
+    Only the first lines are held as lines; the data are streamed into numpy's parser.
+    """
+    with open(path, "rb") as f:
+        lines, whole = head_lines(f, MAX_HEADER_LINES + 1)
+        bom = len(UTF8_BOM) if lines and lines[0].startswith(UTF8_BOM) else 0
+        if bom:
+            lines[0] = lines[0][bom:]
+        names, start = None, None
+        for i, line in enumerate(lines[:MAX_HEADER_LINES]):
+            s = line.strip()
+            if not s or s.startswith(b"#"):
+                continue
+            tokens = [t for t in re.split(rb"[,;\s]+", s) if t]
+            if all(_is_number(t) for t in tokens):
+                start = i + 1 if len(tokens) == 1 and i + 1 < len(lines) else i
+                break
+            names = _header_names(s)
+        if start is None:
+            many = len(lines) > MAX_HEADER_LINES or not whole
+            raise fail(path, f"holds {'no numeric rows in its first 100 lines' if many else 'no points'}")
+        reason = not_points_reason(names)
+        if reason:
+            raise fail(path, reason)
+        f.seek(bom + sum(len(ln) for ln in lines[:start]))
+        table = parse_table(path, f, start + 1)
+    rgb_at = 4 if path.suffix.lower() == ".pts" and table.shape[1] == 7 else 3
+    return from_table(path, table, names, rgb_at)
+
+
+UTF8_BOM = b"\xef\xbb\xbf"
+HEAD_BYTES = 1 << 16
+"""Bytes ``head_lines`` reads at first (it reads more while it has too few lines)."""
+
+
+def head_lines(f: BinaryIO, count: int) -> tuple[list[bytes], bool]:
+    """Up to the first ``count`` complete lines of ``f`` from where it stands, with their line ends,
+    and whether they are all its lines. Leaves ``f`` where it was."""
+    begin, data = f.tell(), b""
+    while True:
+        size = max(HEAD_BYTES, len(data))
+        chunk = f.read(size)
+        data, whole = data + chunk, len(chunk) < size
+        lines = data.splitlines(keepends=True)
+        if whole or len(lines) > count:
+            break
+    f.seek(begin)
+    if not whole:
+        lines = lines[:-1]  # may be cut short (or a \r\n cut in two)
+    return lines[:count], whole and len(lines) <= count
+
+
+CYLINDER_COLUMNS = ("start_x", "axis_x", "length", "radius")
+"""Header columns of a cylinder model (TreeQSM's exported ``QSM.cylinder``), not of a point cloud."""
+TEXT_SUFFIXES = (".xyz", ".txt", ".csv", ".asc", ".pts")
+"""Suffixes read by ``read_text``."""
+
+
+def not_points_reason(names: list[str] | None) -> str | None:
+    """Why a text table with header ``names`` is recognisably not a point cloud (a cylinder table:
+    start or axis columns and a radius, without x, y, z), else None."""
+    if not names or all(k in names for k in "xyz"):
+        return None
+    if "radius" in names and ("start_x" in names or "axis_x" in names):
+        return (f"is a cylinder table ({', '.join(CYLINDER_COLUMNS)}: e.g. a TreeQSM model), "
+                "not a point cloud")
+    return None
+
+
+def sniff_not_points(path: Path, limit: int = 65536) -> str | None:
+    """Why a text file is recognisably not a point cloud (``not_points_reason`` of its header, or prose
+    without numbers), from its first ``limit`` bytes only: cheap enough to sort the files of a folder.
+    None for other formats, for files that cannot be read and for anything else (``read_text`` judges)."""
+    if path.suffix.lower() not in TEXT_SUFFIXES:
+        return None
+    try:
+        with open(path, "rb") as f:
+            data = f.read(limit)
+        lines = data.removeprefix(b"\xef\xbb\xbf").splitlines()
+    except OSError:
+        return None
+    names = None
+    for line in lines[:MAX_HEADER_LINES]:
+        s = line.strip()
+        if not s or s.startswith(b"#"):
+            continue
+        if all(_is_number(t) for t in re.split(rb"[,;\s]+", s) if t):
+            return not_points_reason(names)
+        names = _header_names(s)
+    # read_text refuses it too; a short .txt of prose (a README beside the scans) is no scan either,
+    # while a short broken .xyz stays a scan that fails, so its user hears of it
+    short_prose = path.suffix.lower() == ".txt" and 0 < len(data) < limit and any(re.search(rb"[A-Za-z]{3,}", ln) for ln in lines)
+    if len(lines) > MAX_HEADER_LINES or short_prose:
+        return f"holds text without numbers in its first {MAX_HEADER_LINES} lines (e.g. a licence), not a point cloud"
+    return None
+
+
+def parse_table(path: Path, f: BinaryIO, first_line: int) -> np.ndarray:
+    """The numbers of ``f`` from where it stands (that is line ``first_line``) as an (R, C>=3) float64
+    table.
+
+    numpy's C parser (``np.loadtxt``) streams well-formed data, with the delimiter of the first rows;
+    anything it refuses is read whole and parsed again with commas and semicolons as spaces, then if
+    need be line by line to say what is wrong where. Rows with NaN or infinite values are refused with
+    their line.
+    """
+    begin = f.tell()
+    rows = [r.split(b"#", 1)[0] for r in head_lines(f, 4 * ROWS_CHECKED)[0]]
+    _refuse_decimal_commas(path, rows, first_line)
+    sample = b"".join(rows)
+    table = _loadtxt(f, "," if b"," in sample else ";" if b";" in sample else None)
+    if table.shape[1] < 3 or not len(table):
+        f.seek(begin)
+        body = f.read()
+        table = _loadtxt(io.BytesIO(body.replace(b",", b" ").replace(b";", b" ")), None)
+        if table.shape[1] < 3 or not len(table):
+            table = _parse_carefully(path, _rows(body), first_line)
+    bad = ~np.isfinite(table).all(axis=1)
+    if bad.any():
+        f.seek(begin)
+        numbers = [first_line + i for i, r in enumerate(_rows(f.read())) if r.strip()]
+        raise fail(
+            path,
+            f"{int(bad.sum())} point(s) have NaN or infinite values (first on line {numbers[int(np.argmax(bad))]})",
+        )
+    return table
+
+
+def _loadtxt(f: BinaryIO, delimiter: str | None) -> np.ndarray:
+    """``np.loadtxt`` of a binary stream (numbers are ASCII: latin-1 decodes any byte), or an empty
+    (0, 0) table when it refuses the data."""
+    text = io.TextIOWrapper(f, encoding="latin-1")
+    try:
+        with warnings.catch_warnings():  # "input contained no data": said by the caller, as an InputError
+            warnings.simplefilter("ignore", UserWarning)
+            return np.loadtxt(text, delimiter=delimiter, ndmin=2)
+    except ValueError:
+        return np.zeros((0, 0))
+    finally:
+        text.detach()  # leave ``f`` open
+
+
+DECIMAL_COMMA = re.compile(rb"[-+]?\d+,\d+(?:[eE][-+]?\d+)?")
+"""A number written with a decimal comma, e.g. ``-1,234`` or ``5,6e-3``."""
+ROWS_CHECKED = 20
+"""Data rows ``_refuse_decimal_commas`` looks at."""
+
+
+def _refuse_decimal_commas(path: Path, lines: list[bytes], first_line: int) -> None:
+    """InputError when a row's values are separated by spaces, tabs or semicolons and written with
+    decimal commas (``1,25 3,5 7,0`` or ``1,25;3,5;7,0``): read as comma-separated columns they would
+    become twice as many whole numbers. Comma-separated rows (``1.25,3.5,7.0``, ``1, 2, 3``) pass."""
+    seen = 0
+    for i, line in enumerate(lines):
+        tokens = [t for t in re.split(rb"[;\s]+", line.split(b"#", 1)[0]) if t]
+        if not tokens:
+            continue
+        commas = [t for t in tokens if DECIMAL_COMMA.fullmatch(t)]
+        if len(tokens) >= 3 and commas and all(b"," not in t or t in commas for t in tokens):
+            example = commas[0].decode("utf-8", "replace")
+            raise fail(path, f"line {first_line + i}: '{example}' looks like a number with a decimal comma; "
+                             "decimal commas? convert them to points (e.g. sed 's/,/./g') and read it again")
+        seen += 1
+        if seen >= ROWS_CHECKED:
+            return
+
+
+def _rows(body: bytes) -> list[bytes]:
+    """The lines of ``body`` with delimiters turned to spaces and ``#`` comments removed."""
+    if b"," in body or b";" in body:
+        body = body.replace(b",", b" ").replace(b";", b" ")
+    rows = body.splitlines()
+    return [r.split(b"#", 1)[0] for r in rows] if b"#" in body else rows
+
+
+def _parse_carefully(path: Path, rows: list[bytes], first_line: int) -> np.ndarray:
+    """The table of ``rows``, or InputError naming the first line that is wrong and how."""
+    counts = np.array([len(r.split()) for r in rows], dtype=np.int64)
+    keep = np.flatnonzero(counts > 0)
+    if not keep.size:
+        raise fail(path, "holds no points")
+    ncols = int(counts[keep[0]])
+    if ncols < 3:
+        raise fail(
+            path, f"line {first_line + keep[0]} has {ncols} column(s); x, y and z need at least 3"
+        )
+    ragged = keep[counts[keep] != ncols]
+    if ragged.size:
+        i = int(ragged[0])
+        raise fail(
+            path,
+            f"line {first_line + i} has {counts[i]} values, expected {ncols} like line {first_line + keep[0]}",
+        )
+    try:
+        tokens = b" ".join(rows).split()
+        values = np.fromiter(map(float, tokens), dtype=np.float64, count=len(tokens))
+    except ValueError:
+        i, token = next((i, t) for i, r in enumerate(rows) for t in r.split() if not _is_number(t))
+        raise fail(
+            path, f"line {first_line + i}: '{token.decode('utf-8', 'replace')}' is not a number"
+        ) from None
+    return values.reshape(-1, ncols)
+
+
+# ---------------------------------------------------------------- PLY, LAS/LAZ, NPY
