@@ -159,7 +159,8 @@ def damaged(path: Path, exc: sqlite3.DatabaseError) -> StoreError:
     """The user-facing error for ``exc`` raised by SQLite on the catalog at ``path``: ``CatalogDamaged``
     when the file is damaged, a plain ``StoreError`` when it is busy or cannot be read."""
     name = getattr(exc, "sqlite_errorname", "")
-    if name in _NOT_DAMAGE or (not name and "locked" in str(exc)):
+    primary = "_".join(name.split("_")[:2])  # SQLITE_IOERR_WRITE (a full disk, a file-size limit) is an I/O error
+    if primary in _NOT_DAMAGE or (not name and "locked" in str(exc)):
         return StoreError(f"{path}: the catalog cannot be used right now ({exc})")
     return CatalogDamaged(path, f"is damaged ({exc})")
 
