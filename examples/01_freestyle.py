@@ -51,7 +51,7 @@ def libraries(seed: int) -> dict[str, list]:
 
 def new_tree(trunk, branches: list, rng: np.random.Generator):
     """An Assembly: ``trunk`` at its original pose, each of ``branches`` turned and scaled at random."""
-    from arboretum_library.model import Assembly
+    from arboretum_library.assembly import Assembly
     from arboretum_server.assembly import ops
 
     get = source([trunk], branches)

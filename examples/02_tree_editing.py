@@ -45,7 +45,7 @@ NEW_RGBA = (0.10, 0.35, 0.95, 1.0)
 
 def load_whole(examples: list, get):
     """Every example at its original pose (identity), recombination off."""
-    from arboretum_library.model import Assembly
+    from arboretum_library.assembly import Assembly
     from arboretum_server.assembly import ops
     from arboretum_server.assembly.recombine import RecombineOptions
 

@@ -135,8 +135,8 @@ def greedy(trunks: list, pool: list, target: np.ndarray, cam, rng: np.random.Gen
 
 def assemble(chosen: list, get):
     """The assembly of the chosen placements (turn about the base, scale, base on the anchor), joined."""
+    from arboretum_library.assembly import Assembly
     from arboretum_library.geometry import make_transform
-    from arboretum_library.model import Assembly
     from arboretum_server.assembly import ops
     from arboretum_server.assembly.recombine import RecombineOptions
 

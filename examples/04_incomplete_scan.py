@@ -73,7 +73,7 @@ def find_gap(points: np.ndarray, root: np.ndarray, bin_deg: float = 10.0) -> tup
 
 def fill(examples: list, get, root: np.ndarray, gap: tuple[float, float]):
     """The whole tree at its pose plus turned copies of intact-side examples in the gap: (assembly, copies)."""
-    from arboretum_library.model import Assembly
+    from arboretum_library.assembly import Assembly
     from arboretum_server.assembly import ops
     from arboretum_server.assembly.recombine import RecombineOptions
 
