@@ -60,8 +60,9 @@ def test_export_paths_are_checked_before_any_work(capsys, tmp_path, lib, out, me
 
 
 def test_export_onto_the_from_session_or_twice_to_one_file_is_refused(capsys, tmp_path, lib):
-    code, _ = assemble(capsys, tmp_path, lib, "- add: {example: ex-0}\n", "--out", str(tmp_path / "s.glb"))
+    code, _ = assemble(capsys, tmp_path, lib, "- add: {example: ex-0}\n", "--out", str(tmp_path / "s.npz"))
     assert code == 0
+    (tmp_path / "s.npz").rename(tmp_path / "s.glb")  # a session under an export's name
     code, err = assemble(capsys, tmp_path, lib, f"- export: {{out: {tmp_path}/s.glb}}\n", "--from", str(tmp_path / "s.glb"))
     assert f"operation 1 (export): out {tmp_path}/s.glb: is the input" in one_line(code, err)
     code, err = assemble(capsys, tmp_path, lib, f"- export: {{out: {tmp_path}/a.glb}}\n- export: {{out: {tmp_path}/a.glb}}\n")

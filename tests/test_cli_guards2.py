@@ -186,7 +186,7 @@ def test_assemble_refuses_to_overwrite_its_script_but_updates_a_session(tmp_path
     script = tmp_path / "a.yaml"
     script.write_text(SCRIPT)
     assert main(["assemble", str(script), "--library", str(lib), "--out", str(script)]) == 2
-    assert "is the input" in _err_line(capsys) and script.read_text() == SCRIPT
+    assert "writes .npz files, not .yaml" in _err_line(capsys) and script.read_text() == SCRIPT
     session = tmp_path / "s.npz"
     assert main(["assemble", str(script), "--library", str(lib), "--out", str(session), "--json"]) == 0
     first = json.loads(capsys.readouterr().out)["placements"]

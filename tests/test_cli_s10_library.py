@@ -4,6 +4,7 @@ reproducible, the help lists every action, counts are singular when they are 1."
 
 from __future__ import annotations
 
+import errno
 import io
 import json
 import os
@@ -81,8 +82,8 @@ def test_export_target_is_checked_first_and_named(lib_path, tmp_path, capsys, mo
 
 
 def test_export_failing_while_writing_names_the_archive_not_the_temp_file(lib_path, tmp_path, monkeypatch):
-    def full(*a, **k):
-        raise OSError(28, "No space left on device", str(tmp_path / f".a.tar.{os.getpid()}.tmp"))
+    def full(*a, **k):  # what write() raises on a full disk: an OSError naming no file
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
     monkeypatch.setattr(tarfile.TarFile, "addfile", full)
     with Library.open(lib_path, fsync=False) as lib, pytest.raises(InputError) as info:

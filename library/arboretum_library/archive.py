@@ -71,7 +71,9 @@ def export_archive(lib, path: Path, progress: ProgressFn = no_progress) -> dict:
     """Write every example of ``lib`` (a ``Library``) to the tar ``path`` (temp file, then rename).
 
     ``path`` is checked first (``outputs.check_output``: not a folder, its folder exists and can be
-    written, not inside the library): an ``InputError`` names it, not the temporary file."""
+    written, not inside the library): an ``InputError`` names it, not the temporary file. So does a write
+    failing later (a full disk: an ``OSError`` with no file name); a library file that cannot be read is
+    a ``StoreError`` naming its folder. The temporary file is removed either way."""
     path = check_output(path, "ARCHIVE", libraries=[lib.root])
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
@@ -82,8 +84,8 @@ def export_archive(lib, path: Path, progress: ProgressFn = no_progress) -> dict:
             _add_member(tf, MANIFEST, json.dumps(manifest, indent=1).encode(),
                         max((e["mtime"] for e in listed), default=0))
         os.replace(tmp, path)
-    except OSError as exc:
-        if exc.filename is None or Path(exc.filename) not in (tmp, path):
+    except OSError as exc:  # a failing write() (full disk, file too large) names no file
+        if exc.filename is not None and Path(exc.filename) not in (tmp, path):
             raise
         raise InputError(f"ARCHIVE {path}: cannot write it ({exc.strerror or exc})") from None
     finally:
@@ -101,6 +103,8 @@ def _write_examples(tf: tarfile.TarFile, lib, progress: ProgressFn) -> list[dict
             meta, npz = (folder / META).read_bytes(), (folder / ARRAYS).read_bytes()
         except FileNotFoundError:
             continue  # deleted by another process meanwhile
+        except OSError as exc:  # a read error is the library's, never the archive's (see export_archive)
+            raise StoreError(f"{folder}: cannot read the example ({exc.strerror or exc})") from None
         try:
             head = decode(meta, npz, str(folder))[1]
         except ValidationError as exc:

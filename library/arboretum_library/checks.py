@@ -29,10 +29,12 @@ def check_input_file(path: str, what: str) -> Path:
 
 def check_number(value: float | None, what: str, lo: float, hi: float, lo_open: bool = False) -> None:
     """``InputError`` unless ``value`` (None: the default) is a finite number in [lo, hi] ((lo, hi]
-    when ``lo_open``)."""
+    when ``lo_open``); ``hi`` may be ``math.inf`` (no upper bound: the message then asks for a finite
+    number, never for one "<= inf")."""
     if value is None:
         return
     low_ok = value > lo if lo_open else value >= lo
     if not (math.isfinite(value) and low_ok and value <= hi):
         low = f"> {lo:g}" if lo_open else f">= {lo:g}"
-        raise InputError(f"{what} must be a number {low} and <= {hi:g}, got {value}")
+        high = f"<= {hi:g}" if math.isfinite(hi) else "finite"
+        raise InputError(f"{what} must be a number {low} and {high}, got {value}")

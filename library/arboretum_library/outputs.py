@@ -60,15 +60,28 @@ def check_output(path: PathLike, what: str = "--out", *, inputs: Iterable[PathLi
 
 
 def same_file(a: PathLike, b: PathLike) -> bool:
-    """Whether ``a`` and ``b`` name the same file: the same existing file (links included), or the
-    same absolute path when either does not exist yet."""
+    """Whether ``a`` and ``b`` name the same file: the same existing file (links included), or, when
+    either does not exist yet, the same name in the same folder once the links in the folders' paths
+    are resolved (``dir/x.glb`` and ``link-to-dir/x.glb``)."""
     a, b = Path(a), Path(b)
     try:
         if a.exists() and b.exists():
             return os.path.samefile(a, b)
     except OSError:
         pass
-    return os.path.abspath(a) == os.path.abspath(b)
+    return _entry(a) == _entry(b)
+
+
+def _entry(path: Path) -> Path:
+    """The folder entry a write to ``path`` creates or replaces: its folder with every link resolved,
+    and its own name (a temporary file renamed over a link replaces the link, not its target)."""
+    path = path.absolute()
+    try:
+        if path.name in ("", ".", ".."):
+            return path.resolve()
+        return path.parent.resolve() / path.name
+    except (OSError, RuntimeError):  # a link loop
+        return Path(os.path.abspath(path))
 
 
 def inside(path: PathLike, folder: PathLike) -> bool:

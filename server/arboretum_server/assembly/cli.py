@@ -15,8 +15,9 @@ Each operation is a one-key map, run by the same handlers as the server, in-proc
 A transform is ``T`` (a 4x4 matrix) or ``at`` (translation, metres), ``rotate`` ([axis x, y, z, degrees])
 or ``rotate_z`` (degrees) and ``scale``; ``transform`` and ``transform_lobe`` keep the current value of
 each of them left out. The whole script is checked before it runs (``script_check``); exports are
-written aside and moved into place, after ``--out``, only once every operation succeeded (``script``).
-``--out`` writes the session (an Assembly record, .npz).
+written aside and moved into place, after ``--out``, only once every operation succeeded (``script``),
+with Ctrl-C held back meanwhile: an interrupt leaves the old files or the new ones, never a mix.
+``--out`` writes the session (an Assembly record, .npz; another suffix is refused).
 """
 
 from __future__ import annotations
@@ -105,6 +106,7 @@ def run(args: argparse.Namespace) -> int:
     import tempfile
 
     from arboretum_library.assembly import Assembly
+    from arboretum_library.atomic import interruptible
     from arboretum_library.codec import load_record, save_record
     from arboretum_library.outputs import check_output
     from arboretum_library.progress import StatusLine
@@ -114,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
 
     # --out may be the --from session: it is read whole first and replaced atomically at the end (the
     # demo continues a session in place); the script and the library's files must never be overwritten
-    check_output(args.out, inputs=[args.script], libraries=[args.library])
+    check_output(args.out, inputs=[args.script], suffixes=(".npz",), libraries=[args.library])
     name, ops = read_script(args.script)
     # the whole script is checked before anything runs: a mistake in any operation writes nothing
     checked = check_ops(ops, inputs=[args.script, args.start], outputs=[args.out], libraries=[args.library])
@@ -125,8 +127,9 @@ def run(args: argparse.Namespace) -> int:
         try:
             results = [runner.run(op, None if args.json else StatusLine()) for op in checked]
             assembly = runner.assembly()
-            save_record(args.out, assembly)
-            runner.commit()  # the exports' files, written aside until now, are moved into place
+            with interruptible():  # a Ctrl-C waits: --out and every export are replaced together, or none
+                save_record(args.out, assembly)
+                runner.commit()  # the exports' files, written aside until now, are moved into place
         finally:
             runner.close()
     data: dict[str, Any] = {

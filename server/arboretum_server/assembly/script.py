@@ -8,8 +8,8 @@ Three rules on top of the handlers, for a pipeline that runs a script and trusts
 - the session an ``undo`` can go back to is the one the script started from: undoing the loading of a
   ``--from`` session is "nothing to undo", as in a fresh script;
 - an export writes its file beside its destination under a hidden temporary name; ``commit`` renames
-  every such file into place once all operations succeeded, and ``close`` removes those left, so a
-  script that fails (or is interrupted) leaves no export behind.
+  every such file into place once all operations succeeded (Ctrl-C held back until the last rename),
+  and ``close`` removes those left, so a script that fails (or is interrupted) leaves no export behind.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ import numpy as np
 
 from arboretum_library import protocol as P
 from arboretum_library.assembly import Assembly, Placement
+from arboretum_library.atomic import interruptible
 from arboretum_library.errors import ArboretumError, InputError
 from arboretum_library.geometry import make_transform
 
@@ -141,11 +142,13 @@ class Runner:
         return {"op": "export", "label": f"exported {out} ({len(r.data)} bytes)", "out": str(out), **r.stats}
 
     def commit(self) -> None:
-        """Move every export's file into place (after the last operation succeeded)."""
-        while self.staged:
-            tmp, out = self.staged[0]
-            os.replace(tmp, out)
-            self.staged.pop(0)
+        """Move every export's file into place (after the last operation succeeded), Ctrl-C held back
+        until the last one (``atomic.interruptible``; the caller may hold it over more, e.g. ``--out``)."""
+        with interruptible():
+            while self.staged:
+                tmp, out = self.staged[0]
+                os.replace(tmp, out)
+                self.staged.pop(0)
 
     def assembly(self) -> Assembly:
         return self._call(P.SessionGet(session=self.session)).assembly

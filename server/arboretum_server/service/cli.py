@@ -43,8 +43,9 @@ def curve_keys(folder: str):
     """(server public, server secret) and the authenticator accepting the keys in ``folder/clients/*.key``.
 
     Every key file is read here, before anything starts: one that cannot be read (a stray README.key, a
-    truncated key) or an empty ``clients/`` is an ``InputError`` naming it, never a server that silently
-    refuses every client. Keys added later need a restart."""
+    truncated key), a ``server.key`` that is not the public half of ``server.key_secret`` or an empty
+    ``clients/`` is an ``InputError`` naming it, never a server that silently refuses every client. Keys
+    added later need a restart."""
     from pathlib import Path
 
     import zmq
@@ -58,11 +59,31 @@ def curve_keys(folder: str):
     if not secret.is_file() or not (root / "clients").is_dir():
         raise InputError(f"--curve {folder}: no server.key_secret and clients/ (run 'arboretum keys generate {folder}')")
     pub, sec = load_key(secret, secret=True)
+    check_server_public(root, pub)
     accepted = accepted_keys(root)
     auth = ThreadAuthenticator(zmq.Context.instance())
     auth.start()
     auth.configure_curve_callback(domain="*", credentials_provider=_Accepted(accepted))
     return (pub, sec), auth
+
+
+def check_server_public(root, pub: bytes) -> None:
+    """``InputError`` naming both files when ``root/server.key`` (the key the clients are given) is not the
+    public half of ``root/server.key_secret`` (``pub``): every client would be refused, seen as a timeout.
+    A folder without ``server.key`` passes (the server needs only its secret)."""
+    from arboretum_library.errors import InputError
+    from arboretum_library.remote import load_key
+
+    public, secret = root / "server.key", root / "server.key_secret"
+    if not public.exists():
+        return
+    try:
+        given = load_key(public)[0]
+    except InputError as exc:
+        raise InputError(f"--curve {root}: {exc}") from None
+    if given != pub:
+        raise InputError(f"--curve {root}: {public} is not the public key of {secret}, so no client given it "
+                         "could connect; restore the server.key made with that secret, or make a new key folder")
 
 
 def accepted_keys(root) -> frozenset[bytes]:

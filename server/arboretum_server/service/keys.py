@@ -5,13 +5,19 @@ on the server), ``DIR/NAME.key_secret`` (give it to the client NAME, default ``c
 ``DIR/clients/NAME.key`` (the public keys the server accepts: one file per client). A later run with a
 new ``--client`` adds that client's pair and keeps the server's, so every client given keys before
 stays accepted. ``--force`` replaces an existing client's pair (never the server's: a new server key
-needs a new folder). ``arboretum serve --curve DIR`` and ``Remote(..., curve=DIR)`` read them.
+needs a new folder). Runs on one folder at once take turns (a lock on the folder), so two new clients
+added together share one server pair; each pair is written aside and renamed into place with Ctrl-C
+held back, so an interrupted run leaves the old pair or the new one, never half of each.
+``arboretum serve --curve DIR`` (which refuses a ``server.key`` not matching ``server.key_secret``) and
+``Remote(..., curve=DIR)`` read them.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from arboretum_library.cli import add_json_flag, emit
@@ -55,17 +61,18 @@ def generate(folder: str | os.PathLike, client: str = "client", force: bool = Fa
         raise InputError(f"DIR {root}: is a file, not a folder")
     server_pub, server_sec = root / f"{SERVER}.key", root / f"{SERVER}.key_secret"
     client_sec, accepted = root / f"{client}.key_secret", root / "clients" / f"{client}.key"
-    if server_pub.exists() != server_sec.exists():
-        raise InputError(f"{root} holds only one of {server_pub.name} and {server_sec.name}; "
-                         "restore the other or use a new folder")
-    if not force and (client_sec.exists() or accepted.exists()):
-        raise InputError(f"{root} already holds keys for the client {client!r} "
-                         "(use --force to replace them, or --client NAME to add another client)")
     (root / "clients").mkdir(parents=True, exist_ok=True)
-    kept = server_sec.exists()
-    if not kept:
-        _write_pair(server_sec, server_pub)
-    _write_pair(client_sec, accepted)
+    with _locked(root):  # another run on this folder (a script with '&') waits: one server pair, never two
+        if server_pub.exists() != server_sec.exists():
+            raise InputError(f"{root} holds only one of {server_pub.name} and {server_sec.name}; "
+                             "restore the other or use a new folder")
+        if not force and (client_sec.exists() or accepted.exists()):
+            raise InputError(f"{root} already holds keys for the client {client!r} "
+                             "(use --force to replace them, or --client NAME to add another client)")
+        kept = server_sec.exists()
+        if not kept:
+            _write_pair(server_sec, server_pub)
+        _write_pair(client_sec, accepted)
     return {"server_public": str(server_pub), "server_secret": str(server_sec), "server_key": "kept" if kept else "created",
             "client_secret": str(client_sec), "client_public": str(accepted)}
 
@@ -74,19 +81,46 @@ SECRET_MODE, PUBLIC_MODE = 0o600, 0o644
 """File modes of ``*.key_secret`` (owner only, from the moment the file exists) and of public ``*.key``."""
 
 
+@contextmanager
+def _locked(root: Path) -> Iterator[None]:
+    """Hold an exclusive ``flock`` on the folder ``root`` itself (no lock file is left behind): runs of
+    ``generate`` on one folder, in threads or processes, check and write their keys one at a time."""
+    import fcntl
+
+    fd = os.open(root, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # releases the lock
+
+
 def _write_pair(secret: Path, public: Path) -> None:
     """A new CurveZMQ key pair as the certificate files ``secret`` and ``public`` (the format
-    ``zmq.auth.load_certificate`` reads), secret first."""
+    ``zmq.auth.load_certificate`` reads): both written to temporary files first, then renamed, secret
+    first, with Ctrl-C held back until the public one is in place, so an interrupted run leaves the old
+    pair or the new one (an existing pair is replaced only with ``--force``)."""
     import zmq
 
+    from arboretum_library.atomic import interruptible
+
     pub, sec = (k.decode("ascii") for k in zmq.curve_keypair())
-    _write_key(secret, "Secret", f'    public-key = "{pub}"\n    secret-key = "{sec}"\n', SECRET_MODE)
-    _write_key(public, "Public", f'    public-key = "{pub}"\n', PUBLIC_MODE)
+    temps: list[Path] = []
+    try:
+        temps.append(_write_temp(secret, "Secret", f'    public-key = "{pub}"\n    secret-key = "{sec}"\n',
+                                 SECRET_MODE))
+        temps.append(_write_temp(public, "Public", f'    public-key = "{pub}"\n', PUBLIC_MODE))
+        with interruptible():
+            os.replace(temps[0], secret)
+            os.replace(temps[1], public)
+    finally:
+        for tmp in temps:
+            tmp.unlink(missing_ok=True)
 
 
-def _write_key(path: Path, kind: str, keys: str, mode: int) -> None:
-    """Write a certificate to a temporary file opened with ``mode`` (so a secret is never readable by
-    others, whatever the umask), then rename it over ``path``: an interrupted run leaves no half file."""
+def _write_temp(path: Path, kind: str, keys: str, mode: int) -> Path:
+    """A certificate in a new temporary file beside ``path``, opened with ``mode`` (so a secret is never
+    readable by others, whatever the umask); its path. Nothing is left when writing fails."""
     import secrets
 
     text = (f"#   ZeroMQ CURVE {kind} Certificate, written by 'arboretum keys generate'\n"
@@ -98,10 +132,10 @@ def _write_key(path: Path, kind: str, keys: str, mode: int) -> None:
         with os.fdopen(fd, "w", encoding="ascii") as fh:
             os.fchmod(fh.fileno(), mode)  # exact: the umask can only have narrowed it
             fh.write(text)
-        os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+    return tmp
 
 
 def run(args: argparse.Namespace) -> int:
