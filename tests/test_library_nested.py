@@ -42,3 +42,11 @@ def test_another_tools_library_json_above_is_no_library(tmp_path):
     assert enclosing_library(proj / "trees" / "lib") is None
     Library.open(proj / "trees" / "lib", create=True)
     assert (proj / "trees" / "lib" / "library.json").is_file()
+
+
+def test_a_deeply_nested_or_huge_library_json_above_is_no_library(tmp_path):
+    for i, text in enumerate(["[" * 100_000, '{"format": "arboretum-library"' + " " * 70_000 + "}"]):
+        proj = tmp_path / f"p{i}"
+        proj.mkdir()
+        (proj / "library.json").write_text(text)
+        assert enclosing_library(proj / "lib") is None  # a RecursionError before; the second too long

@@ -150,3 +150,42 @@ def test_module_meshes_are_never_guessed(tmp_path):
     assert mesh_up_axis(path, verts, guess=False) == "y"
     v, _ = load_mesh(path, guess=False)
     np.testing.assert_allclose(np.ptp(v, axis=0)[1], 0.12, atol=1e-6)  # the card's length lies along -Y
+
+
+def _folder_with(tmp_path, **meshes):
+    folder = tmp_path / "mods"
+    folder.mkdir()
+    for name, (mesh, header) in meshes.items():
+        _write_obj(folder / f"{name}.obj", np.asarray(mesh.vertices), np.asarray(mesh.faces), header)
+    return folder
+
+
+def test_a_module_folder_is_read_by_header_or_modules_up_never_by_shape(tmp_path):
+    from arboretum_server.modules.moduleset import load_module_set
+
+    branch = trimesh.creation.cylinder(radius=0.03, height=1.0, sections=8)
+    branch.apply_translation([0, 0, 0.5])  # 1 m along Z, base at 0: a Z-up export without our header
+    leaf = trimesh.creation.box(extents=[0.05, 0.005, 0.3])  # a Y-up card, thin along Y, long along Z
+    ours = trimesh.creation.cylinder(radius=0.03, height=0.8, sections=8)
+    ours.apply_translation([0, 0, 0.4])
+    folder = _folder_with(tmp_path, branch_00=(branch, "# exported by 3ds Max"),
+                          branch_01=(leaf, "# Blender 4.1"),
+                          branch_02=(ours, "# arboretum OBJ (Z up, metres)"))
+    assert mesh_up_axis(folder / "branch_01.obj", np.asarray(leaf.vertices)) == "z"  # the shape guess would
+
+    def extents(up):
+        return {m.name: np.ptp(m.vertices, axis=0) for m in load_module_set(folder, up).modules}
+
+    auto = extents("auto")
+    assert np.argmax(auto["branch_00"]) == 1  # OBJ's usual Y up: the Z-up branch lies along Y
+    assert np.argmax(auto["branch_01"]) == 1 and auto["branch_01"][2] < 0.01  # the card flat, not guessed up
+    assert np.argmax(auto["branch_02"]) == 2  # our header says Z up
+    z = extents("z")
+    assert np.argmax(z["branch_00"]) == 2 and np.argmax(z["branch_02"]) == 2  # --modules-up z; header kept
+
+
+def test_modules_up_needs_modules(tmp_path, capsys):
+    ball = trimesh.creation.icosphere(subdivisions=1, radius=1.0)
+    _write_obj(tmp_path / "c.obj", ball.vertices, ball.faces)
+    code = main(["modules", "--crown", str(tmp_path / "c.obj"), "--out", str(tmp_path / "m.glb"), "--modules-up", "z"])
+    assert code == 2 and "--modules-up applies to the files of --modules DIR only" in capsys.readouterr().err

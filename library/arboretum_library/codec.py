@@ -151,10 +151,7 @@ def npz_to_arrays(data: bytes | io.BufferedIOBase, where: str = "npz") -> dict[s
         what = "one .npy array, not a zip of arrays" if head == b"\x93NUMPY" else "not a zip archive"
         raise ValidationError(f"{where}: not a readable .npz ({what})")
     try:
-        loaded = np.load(src, allow_pickle=False)
-        if not isinstance(loaded, np.lib.npyio.NpzFile):  # a bare .npy array
-            raise ValidationError(f"{where}: not a readable .npz (one .npy array, not a zip of arrays)")
-        with loaded as z:
+        with np.load(src, allow_pickle=False) as z:  # a zip by its first bytes (above): an NpzFile
             locked = [m.filename for m in z.zip.infolist() if m.flag_bits & _ENCRYPTED]
             if locked:
                 raise ValidationError(f"{where}: not a readable .npz ({locked[0]!r} is encrypted)")

@@ -185,9 +185,11 @@ def enclosing_library(path: Path) -> Path | None:
 
 
 def _is_marker(path: Path) -> bool:
+    """Whether ``path`` is an Arboretum ``library.json`` (read at most 64 KiB; ours is one short line)."""
     try:
-        head = json.loads(path.read_bytes()[:65536])
-    except (OSError, ValueError):  # missing, a folder, unreadable, not JSON
+        with open(path, "rb") as f:
+            head = json.loads(f.read(65536))
+    except (OSError, ValueError, RecursionError):  # missing, a folder, unreadable, not JSON, nested deep
         return False
     return isinstance(head, dict) and head.get("format") == LIBRARY_FORMAT
 

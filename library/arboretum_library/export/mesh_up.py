@@ -1,12 +1,13 @@
 """The up axis of a mesh file read into the world frame (Z up): ``--up auto|y|z`` of ``render`` and
-``modules --crown``.
+``modules --crown``, and ``modules --modules-up`` for module pieces.
 
 glTF is Y up by definition. OBJ and PLY do not say: Arboretum's OBJ names its axis on its first line
 (``obj.obj_header_axis``) and its PLY in a header comment (``ply_header_axis``), and a PLY is Z up as
-Arboretum, scanners and photogrammetry tools write it. For a file without Arboretum's header, ``auto`` keeps the format's usual axis (OBJ Y, as Blender and Maya
-write it; PLY Z) unless the vertices stand along the other one surely: the same test as a point
-cloud's ``--up auto`` (``pointio_spatial.guess_up_axis``, confidence >= 0.75), so a tree exported Z up
-from 3ds Max or a GIS tool is read upright. An explicit ``y`` or ``z`` always wins.
+Arboretum, scanners and photogrammetry tools write it. For a file without Arboretum's header,
+``auto`` keeps the format's usual axis (OBJ Y, as Blender and Maya write it; PLY Z) unless the
+vertices stand along the other one surely: the same test as a point cloud's ``--up auto``
+(``pointio_spatial.guess_up_axis``, confidence >= 0.75), so a tree exported Z up from 3ds Max or a GIS
+tool is read upright. An explicit ``y`` or ``z`` always wins. Module pieces are never guessed.
 """
 
 from __future__ import annotations
@@ -43,6 +44,12 @@ def ply_header_axis(path: str | os.PathLike) -> str | None:
     return None
 
 
+def header_axis(path: str | os.PathLike) -> str | None:
+    """'y' or 'z' when the .obj or .ply at ``path`` carries Arboretum's header, else None."""
+    suffix = Path(path).suffix.lower()
+    return obj_header_axis(path) if suffix == ".obj" else ply_header_axis(path) if suffix == ".ply" else None
+
+
 def mesh_up_axis(path: str | os.PathLike, vertices: np.ndarray, up: str = "auto", what: str = "INPUT",
                  guess: bool = True) -> str:
     """'y' or 'z': the up axis of the mesh file ``path`` whose vertices (V, 3) are ``vertices`` as stored.
@@ -62,7 +69,7 @@ def mesh_up_axis(path: str | os.PathLike, vertices: np.ndarray, up: str = "auto"
     if up != "auto":
         return up
     usual = "y" if suffix == ".obj" else "z"
-    header = obj_header_axis(path) if suffix == ".obj" else ply_header_axis(path) if suffix == ".ply" else None
+    header = header_axis(path)
     if header is not None:
         return header
     if not guess:

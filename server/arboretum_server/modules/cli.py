@@ -35,6 +35,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--up", choices=UP_CHOICES, default="auto",
                    help="up axis of the --crown mesh: auto (default: the format's usual axis above, unless "
                         "its vertices surely stand along the other), y or z")
+    p.add_argument("--modules-up", choices=UP_CHOICES, default="auto",
+                   help="up axis of --modules files without Arboretum's header: auto (default: the format's "
+                        "usual, OBJ Y up; pieces are never guessed from their shape), y or z")
     p.add_argument("--modules", metavar="DIR", default=None,
                    help="module folder (.obj/.glb; default assets/modules/default)")
     p.add_argument("--library", metavar="LIB", default=None, help="example library for an Assembly record")
@@ -90,6 +93,8 @@ def _check_args(args: argparse.Namespace) -> str:
     check_input_file(source, flag)
     check_output(args.out, "--out", inputs=[source], libraries=[args.library])
     suffix = check_format(args.out, args.plain_nodes)
+    if args.modules_up != "auto" and args.modules is None:
+        raise InputError("--modules-up applies to the files of --modules DIR only (the bundled set says its axis)")
     if flag == "--tree" and args.modules is not None:
         raise InputError("--modules applies to --crown and --assembly only (--tree makes its own module "
                          "types from the grown tree; set their number with --types)")
@@ -128,7 +133,7 @@ def _grown(args: argparse.Namespace):
     from .options import ModularTreeOptions
     from .report import constraint_report
 
-    modules = _module_set(args.modules, args.types)
+    modules = _module_set(args.modules, args.types, args.modules_up)
     if args.crown:
         meshes = [_crown_mesh(args.crown, args.up)]
         root = crown_root(meshes[0][0])
@@ -151,7 +156,7 @@ def _assembly_crown(path: str, library: str | None):
     return hbl_crown(load_structure(path, library), f"--assembly {path}")
 
 
-def _module_set(folder: str | None, types: int | None):
+def _module_set(folder: str | None, types: int | None, up: str = "auto"):
     from .fit import default_module_set
     from .moduleset import load_module_set
 
@@ -160,7 +165,7 @@ def _module_set(folder: str | None, types: int | None):
     elif not Path(folder).is_dir():
         raise InputError(f"--modules {folder}: not a folder")
     else:
-        modules = load_module_set(folder)
+        modules = load_module_set(folder, up)
     if types is None:
         return modules
     keep = [m.name for m in modules.modules if m.is_trunk]
