@@ -48,7 +48,7 @@ def curve_server(keydir, tmp_path):
 
 
 def _public(path: Path) -> bytes:
-    return remote.load_key(path)[0]
+    return remote.load_key(path, secret=path.name.endswith(".key_secret"))[0]  # a secret only as a secret
 
 
 # ---------------------------------------------------------------- which secret (p16)

@@ -4,10 +4,14 @@ folder share one server pair; an interrupted ``--force`` leaves the old client p
 
 from __future__ import annotations
 
+import errno
+import fcntl
 import os
 import random
+import shutil
 import signal
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -15,7 +19,7 @@ import zmq
 
 from arboretum_library.cli import main
 from arboretum_library.errors import InputError
-from arboretum_library.remote import load_key
+from arboretum_library.remote import Remote, load_key
 from arboretum_server.service.cli import check_server_public, curve_keys
 from arboretum_server.service.keys import generate
 
@@ -115,3 +119,123 @@ def test_ctrl_c_during_force_leaves_a_matching_client_pair(tmp_path, monkeypatch
     secret_pub = load_key(k / "client.key_secret", secret=True)[0]
     assert secret_pub == load_key(k / "clients" / "client.key")[0] != old
     assert not list(k.rglob(".*"))
+
+
+# ---------------------------------------------------------------- a secret in a public-key file (review 10b)
+
+
+def _secret_of(path: Path) -> str:
+    return load_key(path, secret=True)[1].decode()
+
+
+def test_serve_refuses_a_server_key_holding_the_server_secret_without_printing_it(tmp_path, capsys):
+    k = tmp_path / "k"
+    generate(k)
+    shutil.copy(k / "server.key_secret", k / "server.key")  # the file handed to clients now leaks the secret
+    with pytest.raises(InputError) as info:
+        check_server_public(k, load_key(k / "server.key_secret", secret=True)[0])
+    assert str(info.value).startswith(f"--curve {k}: {k / 'server.key'}: is a public-key file")
+    assert "secret-key line" in str(info.value) and _secret_of(k / "server.key_secret") not in str(info.value)
+    capsys.readouterr()
+    code = main(["serve", "--bind", "tcp://127.0.0.1:0", "--curve", str(k), "--state", str(tmp_path / "st")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert str(k / "server.key") in err[0] and _secret_of(k / "server.key_secret") not in err[0]
+    assert not (tmp_path / "st").exists()
+
+
+def test_serve_refuses_a_client_key_holding_that_client_secret(tmp_path):
+    k = tmp_path / "k"
+    generate(k)
+    generate(k, "bob")
+    shutil.copy(k / "bob.key_secret", k / "clients" / "bob.key")
+    with pytest.raises(InputError) as info:
+        curve_keys(str(k))
+    message = str(info.value)
+    assert f"{k / 'clients' / 'bob.key'}: is a public-key file" in message and "secret-key line" in message
+    assert _secret_of(k / "bob.key_secret") not in message and "\n" not in message
+
+
+def test_remote_refuses_a_server_key_holding_a_secret(tmp_path):
+    k = tmp_path / "k"
+    generate(k)
+    shutil.copy(k / "server.key_secret", k / "server.key")
+    with pytest.raises(InputError) as info:
+        Remote("tcp://127.0.0.1:9", curve=k, handshake=False)
+    assert str(info.value).startswith(f"{k / 'server.key'}: is a public-key file")
+    assert _secret_of(k / "server.key_secret") not in str(info.value)
+
+
+def test_public_key_files_still_load_and_secrets_load_only_as_secrets(tmp_path):
+    k = tmp_path / "k"
+    generate(k)
+    pub, sec = load_key(k / "client.key_secret", secret=True)
+    assert load_key(k / "clients" / "client.key") == (pub, None) and sec is not None
+    with pytest.raises(InputError, match="is a public-key file"):
+        load_key(k / "client.key_secret")
+
+
+# ---------------------------------------------------------------- the folder lock: wait, tell, give up (review 10b)
+
+
+@pytest.fixture
+def held(tmp_path):
+    """The key folder ``tmp_path / 'k'``, with its ``flock`` held here on another descriptor (as another
+    run would); yields a function releasing it."""
+    k = tmp_path / "k"
+    k.mkdir()
+    fd = os.open(k, os.O_RDONLY)
+    fcntl.flock(fd, fcntl.LOCK_EX)
+    closed = []
+
+    def release() -> None:
+        if not closed:
+            closed.append(True)
+            os.close(fd)
+
+    yield release
+    release()
+
+
+def test_a_busy_folder_is_told_once_then_given_up_with_one_line(tmp_path, held):
+    told: list[str] = []
+    start = time.monotonic()
+    with pytest.raises(InputError) as info:
+        generate(tmp_path / "k", timeout=0.3, on_wait=told.append)
+    assert 0.3 <= time.monotonic() - start < 5
+    assert told == [f"waiting for another 'arboretum keys generate' on {tmp_path / 'k'} ... (Ctrl-C to stop)"]
+    assert str(info.value) == (f"DIR {tmp_path / 'k'}: another 'arboretum keys generate' held it for 0.3 s; "
+                               "try again when it is done")
+    assert not (tmp_path / "k" / "server.key").exists()
+
+
+def test_a_run_waiting_for_the_lock_goes_on_when_it_is_released(tmp_path, held):
+    told: list[str] = []
+    timer = threading.Timer(0.3, held)
+    timer.start()
+    paths = generate(tmp_path / "k", "alice", timeout=20, on_wait=told.append)
+    timer.join()
+    assert len(told) == 1 and paths["server_key"] == "created"
+    assert load_key(tmp_path / "k" / "alice.key_secret", secret=True)[0] == load_key(Path(paths["client_public"]))[0]
+
+
+def test_the_cli_says_it_waits_on_stderr_then_gives_up(tmp_path, held, capsys, monkeypatch):
+    from arboretum_server.service import keys
+
+    monkeypatch.setattr(keys, "LOCK_TIMEOUT_S", 0.2)
+    code = main(["keys", "generate", str(tmp_path / "k"), "--client", "a"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 2, err
+    assert err[0].startswith("waiting for another 'arboretum keys generate' on ")
+    assert "held it for 0.2 s" in err[1]
+
+
+def test_a_folder_that_cannot_be_locked_is_one_input_error(tmp_path, monkeypatch):
+    def no_flock(fd, op):  # what flock on a folder descriptor gives on some network filesystems
+        raise OSError(errno.EBADF, os.strerror(errno.EBADF))
+
+    monkeypatch.setattr(fcntl, "flock", no_flock)
+    with pytest.raises(InputError) as info:
+        generate(tmp_path / "k")
+    assert str(info.value).startswith(f"DIR {tmp_path / 'k'}: cannot be locked (Bad file descriptor)")
+    assert not (tmp_path / "k" / "server.key").exists()

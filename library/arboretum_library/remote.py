@@ -254,7 +254,8 @@ def _choose_client(folder: Path, name: str | None) -> str:
 
 def load_key(path: str | os.PathLike, *, secret: bool = False) -> tuple[bytes, bytes | None]:
     """(public, secret or None), Z85, from a CurveZMQ certificate file. ``InputError`` naming ``path`` when it
-    cannot be read, holds no well-formed public key or, with ``secret``, no secret key matching it."""
+    cannot be read, holds no well-formed public key or, with ``secret``, no secret key matching it; without
+    ``secret`` (a public-key file, the kind handed to others) when it holds a secret key too."""
     import zmq.auth
 
     from .errors import InputError
@@ -269,6 +270,9 @@ def load_key(path: str | os.PathLike, *, secret: bool = False) -> tuple[bytes, b
         raise InputError(f"{path}: {'is empty' if empty else 'holds no public-key line'}, not a CurveZMQ key "
                          "file") from None
     _check_z85(path, "public", pub)
+    if not secret and sec is not None:  # never print the key itself
+        raise InputError(f"{path}: is a public-key file (the kind given to others) but holds a secret-key line, "
+                         "so that secret may have leaked; keep secrets only in *.key_secret files")
     if secret:
         if sec is None:
             raise InputError(f"{path}: holds no secret key")

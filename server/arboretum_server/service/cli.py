@@ -43,9 +43,9 @@ def curve_keys(folder: str):
     """(server public, server secret) and the authenticator accepting the keys in ``folder/clients/*.key``.
 
     Every key file is read here, before anything starts: one that cannot be read (a stray README.key, a
-    truncated key), a ``server.key`` that is not the public half of ``server.key_secret`` or an empty
-    ``clients/`` is an ``InputError`` naming it, never a server that silently refuses every client. Keys
-    added later need a restart."""
+    truncated key), a public key file holding a secret too (a leak), a ``server.key`` that is not the
+    public half of ``server.key_secret`` or an empty ``clients/`` is an ``InputError`` naming it, never a
+    server that silently refuses every client. Keys added later need a restart."""
     from pathlib import Path
 
     import zmq
@@ -69,8 +69,9 @@ def curve_keys(folder: str):
 
 def check_server_public(root, pub: bytes) -> None:
     """``InputError`` naming both files when ``root/server.key`` (the key the clients are given) is not the
-    public half of ``root/server.key_secret`` (``pub``): every client would be refused, seen as a timeout.
-    A folder without ``server.key`` passes (the server needs only its secret)."""
+    public half of ``root/server.key_secret`` (``pub``): every client would be refused, seen as a timeout;
+    ``InputError`` naming it when it holds a secret key too (it is handed to clients: a leak). A folder
+    without ``server.key`` passes (the server needs only its secret)."""
     from arboretum_library.errors import InputError
     from arboretum_library.remote import load_key
 
@@ -88,7 +89,7 @@ def check_server_public(root, pub: bytes) -> None:
 
 def accepted_keys(root) -> frozenset[bytes]:
     """The Z85 public keys of ``root/clients/*.key`` (dot files skipped); ``InputError`` naming the first
-    file that is not a client's public key, or when there is none."""
+    file that is not a client's public key alone (a secret key in it too is refused), or when there is none."""
     from arboretum_library.errors import InputError
     from arboretum_library.remote import load_key
 

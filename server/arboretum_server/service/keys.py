@@ -5,10 +5,11 @@ on the server), ``DIR/NAME.key_secret`` (give it to the client NAME, default ``c
 ``DIR/clients/NAME.key`` (the public keys the server accepts: one file per client). A later run with a
 new ``--client`` adds that client's pair and keeps the server's, so every client given keys before
 stays accepted. ``--force`` replaces an existing client's pair (never the server's: a new server key
-needs a new folder). Runs on one folder at once take turns (a lock on the folder), so two new clients
-added together share one server pair; each pair is written aside and renamed into place with Ctrl-C
-held back, so an interrupted run leaves the old pair or the new one, never half of each.
-``arboretum serve --curve DIR`` (which refuses a ``server.key`` not matching ``server.key_secret``) and
+needs a new folder). Runs on one folder at once take turns (a lock on the folder; a run that finds it
+taken says so on stderr and gives up after ``LOCK_TIMEOUT_S``), so two new clients added together share
+one server pair; each pair is written aside and renamed into place with Ctrl-C held back, so an
+interrupted run leaves the old pair or the new one, never half of each. ``arboretum serve --curve DIR``
+(which refuses a ``server.key`` not matching ``server.key_secret`` or holding a secret) and
 ``Remote(..., curve=DIR)`` read them.
 """
 
@@ -16,7 +17,8 @@ from __future__ import annotations
 
 import argparse
 import os
-from collections.abc import Iterator
+import sys
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -24,6 +26,9 @@ from arboretum_library.cli import add_json_flag, emit
 
 SERVER = "server"
 """Base name of the server's key files (``server.key``, ``server.key_secret``): no client may use it."""
+
+LOCK_TIMEOUT_S = 30.0
+"""How long a run waits for another run's lock on the key folder before giving up (an ``InputError``)."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -49,10 +54,12 @@ def check_client(client: str) -> None:
         raise InputError(f"--client {client!r}: '{SERVER}' names the server's own key files; choose another name")
 
 
-def generate(folder: str | os.PathLike, client: str = "client", force: bool = False) -> dict[str, str]:
+def generate(folder: str | os.PathLike, client: str = "client", force: bool = False, *,
+             timeout: float = LOCK_TIMEOUT_S, on_wait: Callable[[str], None] | None = None) -> dict[str, str]:
     """Create the client's key files in ``folder`` (and the server's when missing); returns their paths
-    and ``server_key`` ('created' or 'kept'). ``InputError`` if the client's keys exist (unless ``force``).
-    Secret files are mode 0600 from their creation on, public ones 0644."""
+    and ``server_key`` ('created' or 'kept'). ``InputError`` if the client's keys exist (unless ``force``),
+    or when another run holds the folder's lock for ``timeout`` seconds (``on_wait`` is told once when the
+    wait begins). Secret files are mode 0600 from their creation on, public ones 0644."""
     from arboretum_library.errors import InputError
 
     check_client(client)
@@ -62,7 +69,7 @@ def generate(folder: str | os.PathLike, client: str = "client", force: bool = Fa
     server_pub, server_sec = root / f"{SERVER}.key", root / f"{SERVER}.key_secret"
     client_sec, accepted = root / f"{client}.key_secret", root / "clients" / f"{client}.key"
     (root / "clients").mkdir(parents=True, exist_ok=True)
-    with _locked(root):  # another run on this folder (a script with '&') waits: one server pair, never two
+    with _locked(root, timeout, on_wait):  # another run on this folder waits: one server pair, never two
         if server_pub.exists() != server_sec.exists():
             raise InputError(f"{root} holds only one of {server_pub.name} and {server_sec.name}; "
                              "restore the other or use a new folder")
@@ -82,14 +89,29 @@ SECRET_MODE, PUBLIC_MODE = 0o600, 0o644
 
 
 @contextmanager
-def _locked(root: Path) -> Iterator[None]:
+def _locked(root: Path, timeout: float, on_wait: Callable[[str], None] | None) -> Iterator[None]:
     """Hold an exclusive ``flock`` on the folder ``root`` itself (no lock file is left behind): runs of
-    ``generate`` on one folder, in threads or processes, check and write their keys one at a time."""
-    import fcntl
+    ``generate`` on one folder, in threads or processes, check and write their keys one at a time. Waits
+    at most ``timeout`` seconds for another run; ``InputError`` naming the folder when that is over or
+    when the folder cannot be locked at all (some network filesystems refuse ``flock`` on a folder)."""
+    from arboretum_library.errors import InputError
+    from arboretum_library.recovery import wait_for_lock
 
-    fd = os.open(root, os.O_RDONLY)
+    waiting = f"waiting for another 'arboretum keys generate' on {root} ... (Ctrl-C to stop)"
+    tell = (lambda: on_wait(waiting)) if on_wait is not None else None
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
+        fd = os.open(root, os.O_RDONLY)
+    except OSError as exc:
+        raise InputError(f"DIR {root}: cannot be opened to lock it ({exc.strerror or exc})") from None
+    try:
+        try:
+            got = wait_for_lock(fd, timeout, tell)
+        except OSError as exc:  # EBADF, ENOLCK, ... from filesystems without flock on folders
+            raise InputError(f"DIR {root}: cannot be locked ({exc.strerror or exc}), so runs on it could not take "
+                             "turns; use a folder on a local filesystem") from None
+        if not got:
+            raise InputError(f"DIR {root}: another 'arboretum keys generate' held it for {timeout:g} s; "
+                             "try again when it is done")
         yield
     finally:
         os.close(fd)  # releases the lock
@@ -139,6 +161,7 @@ def _write_temp(path: Path, kind: str, keys: str, mode: int) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    paths = generate(args.dir, args.client, args.force)
+    paths = generate(args.dir, args.client, args.force, timeout=LOCK_TIMEOUT_S,
+                     on_wait=lambda msg: print(msg, file=sys.stderr, flush=True))
     emit(args, paths, "\n".join(f"{k}: {v}" for k, v in paths.items()))
     return 0
