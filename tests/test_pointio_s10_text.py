@@ -39,7 +39,7 @@ def test_text_reader_holds_about_the_table_not_8_times_the_file(tmp_path, rng):
 
 
 def test_errors_far_into_the_file_name_their_line(tmp_path, pts, monkeypatch):
-    monkeypatch.setattr(pointio_text, "HEAD_BYTES", 256, raising=False)  # head and data in many reads
+    monkeypatch.setattr(pointio_text, "HEAD_BYTES", 256)  # head and data in many reads
     rows = ["// x y z", "# a comment"] + _rows(pts)
     cases = {
         "nan.xyz": (2500, "nan 1 2", r"1 point\(s\) have NaN or infinite values \(first on line 2503\)"),
@@ -55,7 +55,7 @@ def test_errors_far_into_the_file_name_their_line(tmp_path, pts, monkeypatch):
 
 
 def test_mixed_delimiters_byte_order_mark_and_old_mac_line_ends(tmp_path, pts, monkeypatch):
-    monkeypatch.setattr(pointio_text, "HEAD_BYTES", 128, raising=False)
+    monkeypatch.setattr(pointio_text, "HEAD_BYTES", 128)
     space, comma = _rows(pts[:2000]), _rows(pts[2000:], sep=",")
     (tmp_path / "mixed.csv").write_bytes(
         b"\xef\xbb\xbfx y z\n" + ("\n".join(space + comma) + "\n").encode()
@@ -71,7 +71,7 @@ def test_mixed_delimiters_byte_order_mark_and_old_mac_line_ends(tmp_path, pts, m
 
 
 def test_long_headers_and_point_counts(tmp_path, pts, monkeypatch):
-    monkeypatch.setattr(pointio_text, "HEAD_BYTES", 64, raising=False)
+    monkeypatch.setattr(pointio_text, "HEAD_BYTES", 64)
     long = ["# " + "c" * 500] * 30 + ["x y z"]
     (tmp_path / "long.xyz").write_text("\n".join(long + _rows(pts)) + "\n")
     np.testing.assert_allclose(read_points(tmp_path / "long.xyz", Z).points, pts)

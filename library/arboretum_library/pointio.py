@@ -5,7 +5,8 @@ Read: .xyz .txt .csv .asc .pts (text), .ply, .pcd (v0.7 ascii/binary/binary_comp
 back Z up in metres (Y-up files are turned with ``geometry.yup_to_zup``), optionally recentred on its
 trunk base, scaled to a height and thinned evenly to a number of points (VRTree section 4: 12,000 points,
 0.8 m). Every problem with a file raises one ``InputError`` naming it. The per-format code lives in
-``pointio_formats`` (text tables in ``pointio_text``); the spatial helpers (up axis, trunk base, even thinning, spacing) in ``pointio_spatial``.
+``pointio_formats`` (text tables in ``pointio_text``, PCD in ``pointio_pcd``); the spatial helpers (up
+axis, trunk base, even thinning, spacing) in ``pointio_spatial``.
 """
 
 from __future__ import annotations

@@ -16,7 +16,8 @@ def guess_up_axis(points: np.ndarray) -> tuple[str, float]:
     (2 x the 95th percentile distance from the median), and trunk is the same width measured in the lowest
     10% of the extent; an axis whose footprint is a line (thinner than ``SLAB_RATIO`` of its length: a
     flat cloud stood on its edge) loses 4 log(ratio / SLAB_RATIO). Trees are taller than wide, narrow at the
-    foot and round in plan. X is never a candidate; a tie goes to Z. The confidence is a logistic of the score difference. See docs/scan-input.md for limits.
+    foot and round in plan. X is never a candidate; a tie goes to Z. The confidence is a logistic of the
+    score difference. See docs/scan-input.md for limits.
     """
     pts = np.asarray(points, dtype=np.float64)
     if len(pts) > 50_000:
@@ -93,9 +94,10 @@ def even_sample_indices(points: np.ndarray, n: int, rng: np.random.Generator) ->
     """Indices (n,) int64, ascending, of ``n`` points spread evenly over ``points`` (N, 3).
 
     Voxel grid then random fill: the voxel size is found by bisection so that about ``n`` voxels are
-    occupied (on a random subset of 200,000 points for larger clouds); points are ranked at random within their voxel, and the ``n`` points of lowest rank are
-    kept (ties at random). Every voxel so keeps one point before any voxel keeps two, and dense parts of
-    a scan are thinned more than sparse ones. Same ``rng`` state, same result.
+    occupied (on a random subset of 200,000 points for larger clouds); points are ranked at random within
+    their voxel, and the ``n`` points of lowest rank are kept (ties at random). Every voxel so keeps one
+    point before any voxel keeps two, and dense parts of a scan are thinned more than sparse ones. Same
+    ``rng`` state, same result.
     """
     pts = np.asarray(points, dtype=np.float64)
     count = len(pts)
@@ -138,19 +140,20 @@ def median_spacing(points: np.ndarray, rng: np.random.Generator, samples: int = 
     """Median nearest-neighbour distance (metres) over up to ``samples`` random points of ``points``.
 
     Exact for the sampled points: neighbours are searched in the 27 cells around each sampled point of
-    a voxel grid of cell size h; a point whose nearest neighbour is not within h is searched again with
-    2h (or at once with the cell size that must hold the nearest point found so far). One pass with
-    integer arithmetic over all points picks the points in the cells of the next ``POOL_LEVELS``
-    doublings around the sampled points; sorting and distances involve only those, so the work grows
-    with the sample, not with N log N.
+    a voxel grid of cell size h (``_first_cell_size``: from the 1st-99th percentile extent of the sample,
+    so a stray point far away does not put every point in every cell); a point whose nearest neighbour
+    is not within h is searched again with 2h (or at once with the cell size that must hold the nearest
+    point found so far). One pass with integer arithmetic over all points picks the points in the cells
+    of the next ``POOL_LEVELS`` doublings around the sampled points; sorting and distances involve only
+    those, so the work grows with the sample, not with N log N.
     """
     pts = np.asarray(points, dtype=np.float64)
     if len(pts) < 2:
         return 0.0
     query = rng.choice(len(pts), min(samples, len(pts)), replace=False)
     lo, hi = column_bounds(pts)
-    h = max(float((hi - lo).max()) / np.sqrt(len(pts)), 1e-12)
-    grid = _Grid(pts, h, lo, hi)
+    grid = _Grid(pts, _first_cell_size(pts[query], len(pts), float((hi - lo).max())), lo, hi)
+    h = grid.h
     dist = np.full(len(query), np.inf)
     level = np.zeros(len(query), dtype=np.int64)
     pending, pool, pool_level = np.arange(len(query)), None, -1
@@ -172,6 +175,19 @@ def median_spacing(points: np.ndarray, rng: np.random.Generator, samples: int = 
     return float(np.median(dist))
 
 
+def _first_cell_size(sample: np.ndarray, count: int, extent: float) -> float:
+    """Cell size h of ``median_spacing``'s first search: the robust extent of ``sample`` (M, 3) (largest
+    1st-99th percentile range over the axes) over sqrt(``count``), so one stray point far away cannot
+    make every cell hold every point; at least ``extent`` (the full extent) / 2**``MAX_CELL_BITS``, so
+    cell indices and keys stay within int32 / int64. Any h gives the same (exact) result."""
+    lo, hi = np.percentile(sample, [1.0, 99.0], axis=0)
+    robust = float((hi - lo).max())
+    return max(robust / np.sqrt(count), extent / 2.0**MAX_CELL_BITS, 1e-12)
+
+
+MAX_CELL_BITS = 20
+"""Largest cell index of ``median_spacing``'s grid along an axis, as a power of two: with 3 padding cells
+per axis, a key (``_Grid.keys``) stays below 2**61."""
 POOL_LEVELS = 2
 """Cell doublings one pass over all points serves (``median_spacing``): its pool holds the 27 cells
 of size 4 h around each sampled point, so the searches at h and 2h need no other pass."""
@@ -191,7 +207,7 @@ class _Grid:
     """Points per block of a pass over all points (a few tens of MB of temporaries)."""
 
     def __init__(self, pts: np.ndarray, h: float, lo: np.ndarray, hi: np.ndarray) -> None:
-        self.pts = pts
+        self.pts, self.h = pts, h
         self.cells = np.zeros(pts.shape, dtype=np.int32)
         for s in range(0, len(pts), self.ROWS):
             self.cells[s : s + self.ROWS] = np.floor((pts[s : s + self.ROWS] - lo) / h)

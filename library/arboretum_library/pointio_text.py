@@ -1,7 +1,8 @@
-"""Text point clouds (.xyz .txt .csv .asc .pts) behind ``pointio.read_points``: the header read from the
-first lines, the data streamed into ``np.loadtxt`` (a 5M-point file peaks near its own size, not 8x),
-and whatever ``loadtxt`` refuses re-read line by line so an error names its line. Also the sniffing
-that tells a point table from other tables (QSM cylinders) before a batch reads it.
+"""Text point clouds (.xyz .txt .csv .asc .pts) behind ``pointio.read_points``: the header read from
+the first lines, the data streamed into ``np.loadtxt`` (the memory ``loadtxt`` needs, about the file
+for x y z rows, not 8x), and whatever ``loadtxt`` refuses re-read line by line so an error names its
+line. Also the sniffing that tells a point table from other tables (QSM cylinders) before a batch
+reads it.
 """
 
 from __future__ import annotations
@@ -33,28 +34,21 @@ def _header_names(line: bytes) -> list[str]:
 def read_text(path: Path) -> Raw:
     """Whitespace-, comma- or semicolon-separated rows; non-numeric lines before the data are a header.
 
-    A first numeric line holding one number (the point count of Leica .pts files) is skipped. In a
-    7-column .pts file (x y z intensity r g b) the colours are columns 4-6, otherwise columns 3-5.
-    Only the first lines are held as lines; the data are streamed into numpy's parser.
+    A first numeric line holding one number (the point count of Leica .pts files) is skipped, and in a
+    .pts file so are the count lines of later blocks (``_drop_block_counts``). In a 7-column .pts file
+    (x y z intensity r g b) the colours are columns 4-6, otherwise columns 3-5. Only the first lines are
+    held as lines; the data are streamed into numpy's parser.
     """
     with open(path, "rb") as f:
         lines, whole = head_lines(f, MAX_HEADER_LINES + 1)
         bom = len(UTF8_BOM) if lines and lines[0].startswith(UTF8_BOM) else 0
         if bom:
             lines[0] = lines[0][bom:]
-        names, start = None, None
-        for i, line in enumerate(lines[:MAX_HEADER_LINES]):
-            s = line.strip()
-            if not s or s.startswith(b"#"):
-                continue
-            tokens = [t for t in re.split(rb"[,;\s]+", s) if t]
-            if all(_is_number(t) for t in tokens):
-                start = i + 1 if len(tokens) == 1 and i + 1 < len(lines) else i
-                break
-            names = _header_names(s)
-        if start is None:
+        names, first, count = find_header(lines[:MAX_HEADER_LINES])
+        if first is None:
             many = len(lines) > MAX_HEADER_LINES or not whole
             raise fail(path, f"holds {'no numeric rows in its first 100 lines' if many else 'no points'}")
+        start = first + 1 if count == 1 and first + 1 < len(lines) else first
         reason = not_points_reason(names)
         if reason:
             raise fail(path, reason)
@@ -62,6 +56,22 @@ def read_text(path: Path) -> Raw:
         table = parse_table(path, f, start + 1)
     rgb_at = 4 if path.suffix.lower() == ".pts" and table.shape[1] == 7 else 3
     return from_table(path, table, names, rgb_at)
+
+
+def find_header(lines: list[bytes]) -> tuple[list[str] | None, int | None, int]:
+    """The column names of the header of ``lines`` (its last non-numeric line before the data, or None),
+    the index of the first all-numeric line (None when there is none) and its number of values.
+    Blank lines and ``#`` comments (whole lines or line ends) are skipped, so ``1 2 3 # a`` is data."""
+    names = None
+    for i, line in enumerate(lines):
+        s = line.split(b"#", 1)[0].strip()
+        if not s:
+            continue
+        tokens = [t for t in re.split(rb"[,;\s]+", s) if t]
+        if all(_is_number(t) for t in tokens):
+            return names, i, len(tokens)
+        names = _header_names(s)
+    return names, None, 0
 
 
 UTF8_BOM = b"\xef\xbb\xbf"
@@ -112,20 +122,16 @@ def sniff_not_points(path: Path, limit: int = 65536) -> str | None:
     try:
         with open(path, "rb") as f:
             data = f.read(limit)
-        lines = data.removeprefix(b"\xef\xbb\xbf").splitlines()
+        lines = data.removeprefix(UTF8_BOM).splitlines()
     except OSError:
         return None
-    names = None
-    for line in lines[:MAX_HEADER_LINES]:
-        s = line.strip()
-        if not s or s.startswith(b"#"):
-            continue
-        if all(_is_number(t) for t in re.split(rb"[,;\s]+", s) if t):
-            return not_points_reason(names)
-        names = _header_names(s)
+    names, first, _ = find_header(lines[:MAX_HEADER_LINES])
+    if first is not None:
+        return not_points_reason(names)
     # read_text refuses it too; a short .txt of prose (a README beside the scans) is no scan either,
     # while a short broken .xyz stays a scan that fails, so its user hears of it
-    short_prose = path.suffix.lower() == ".txt" and 0 < len(data) < limit and any(re.search(rb"[A-Za-z]{3,}", ln) for ln in lines)
+    short_prose = path.suffix.lower() == ".txt" and 0 < len(data) < limit
+    short_prose = short_prose and any(re.search(rb"[A-Za-z]{3,}", ln) for ln in lines)
     if len(lines) > MAX_HEADER_LINES or short_prose:
         return f"holds text without numbers in its first {MAX_HEADER_LINES} lines (e.g. a licence), not a point cloud"
     return None
@@ -212,6 +218,8 @@ def _rows(body: bytes) -> list[bytes]:
 def _parse_carefully(path: Path, rows: list[bytes], first_line: int) -> np.ndarray:
     """The table of ``rows``, or InputError naming the first line that is wrong and how."""
     counts = np.array([len(r.split()) for r in rows], dtype=np.int64)
+    if path.suffix.lower() == ".pts":
+        _drop_block_counts(path, rows, counts, first_line)
     keep = np.flatnonzero(counts > 0)
     if not keep.size:
         raise fail(path, "holds no points")
@@ -238,4 +246,18 @@ def _parse_carefully(path: Path, rows: list[bytes], first_line: int) -> np.ndarr
     return values.reshape(-1, ncols)
 
 
-# ---------------------------------------------------------------- PLY, LAS/LAZ, NPY
+def _drop_block_counts(path: Path, rows: list[bytes], counts: np.ndarray, first_line: int) -> None:
+    """Blank out (in place) the point-count lines that start the second and later blocks of a
+    multi-block Leica .pts file (count, rows, count, rows...; ``read_text`` skips the first count):
+    one whole number each, which must equal the number of rows up to the next count line."""
+    single = np.flatnonzero(counts == 1)
+    if not single.size or int(counts.max()) < 3:
+        return
+    ends = np.r_[single[1:], len(rows)]
+    for i, end in zip(single, ends):
+        text = rows[i].strip().decode("latin-1")
+        held = int(np.count_nonzero(counts[i + 1 : end]))
+        if not text.isdigit() or int(text) != held:
+            raise fail(path, f"line {first_line + i}: a .pts block count of {text} points, but the block "
+                             f"holds {held} rows (a multi-block Leica .pts file repeats count and rows)")
+        rows[i], counts[i] = b"", 0
