@@ -13,6 +13,7 @@ from arboretum_library import pointio_spatial
 from arboretum_library.errors import InputError
 from arboretum_library.pointio import ReadOptions, median_spacing, read_points
 from arboretum_library.pointio_text import find_header, sniff_not_points
+from test_pointio_s10_spacing import _brute_force  # the exact reference
 
 Z = ReadOptions(up="z")
 PDAL_HEADER = ("X,Y,Z,Intensity,ReturnNumber,NumberOfReturns,ScanDirectionFlag,EdgeOfFlightLine,"
@@ -47,16 +48,6 @@ def test_a_headerless_table_keeps_its_colours_by_position(tmp_path, rng):
     rgb = rng.integers(0, 256, (100, 3))
     np.savetxt(tmp_path / "plain.xyz", np.c_[xyz, rgb], fmt=["%.6f"] * 3 + ["%d"] * 3)
     np.testing.assert_allclose(read_points(tmp_path / "plain.xyz", Z).colors, rgb / 255.0, atol=1e-7)
-
-
-def _brute_force(points: np.ndarray, seed: int, samples: int) -> float:
-    query = np.random.default_rng(seed).choice(len(points), min(samples, len(points)), replace=False)
-    nearest = []
-    for q in query:
-        d = np.sqrt(((points - points[q]) ** 2).sum(axis=1))
-        d[q] = np.inf
-        nearest.append(d.min())
-    return float(np.median(nearest))
 
 
 def test_one_stray_point_far_away_does_not_make_every_cell_hold_every_point(monkeypatch, rng):
