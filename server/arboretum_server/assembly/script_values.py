@@ -114,14 +114,10 @@ def _option(v: Any, tp: str, what: str) -> None:
 
 
 def _ranged(options: dict, where: str) -> dict:
-    from arboretum_library.checks import check_number
-    from arboretum_server.grow.limits import MAX_DENSITY, MAX_LEAF_DENSITY
-    from arboretum_server.service.handlers.grow import grow_options
+    from arboretum_server.service.handlers.grow import checked_options
 
     try:
-        opts = grow_options(options)
-        check_number(opts.density, "growth option density", 0.0, MAX_DENSITY, lo_open=True)
-        check_number(opts.leaf_density, "growth option leaf_density", 0.0, MAX_LEAF_DENSITY)
+        checked_options(options)
     except InputError as exc:
         raise InputError(f"{where}: {exc}") from None
     return options

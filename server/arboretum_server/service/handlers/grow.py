@@ -31,19 +31,29 @@ def grow_options(options: dict):
         raise InputError(f"growth options: {exc}") from None
 
 
+def checked_options(options: dict):
+    """``GrowOptions`` from a request's or a script's ``options`` once their densities are within the
+    limits of ``arboretum grow`` (``InputError`` otherwise)."""
+    from arboretum_library.checks import check_number
+    from arboretum_server.grow.limits import MAX_DENSITY, MAX_LEAF_DENSITY
+
+    opts = grow_options(options)
+    check_number(opts.density, "growth option density", 0.0, MAX_DENSITY, lo_open=True)
+    check_number(opts.leaf_density, "growth option leaf_density", 0.0, MAX_LEAF_DENSITY)
+    return opts
+
+
 def checked_growth(ctx: Context, session_id: str, seed: int, options: dict, lod: int = 0) -> HBL:
     """The session's assembled HBL once ``seed``, ``lod`` and the growth ``options`` are ones a worker
     can grow without exhausting memory (the same limits as ``arboretum grow``: an assemble script's
     export with density 1000 wrote 258 MB, and a negative seed was an internal error)."""
-    from arboretum_library.checks import check_number, check_seed
-    from arboretum_server.grow.limits import MAX_DENSITY, MAX_LEAF_DENSITY, check_size
+    from arboretum_library.checks import check_seed
+    from arboretum_server.grow.limits import check_size
     from arboretum_server.mesh.lod import check_lod
 
     check_seed(seed, "seed")
     check_lod(lod)
-    opts = grow_options(options)
-    check_number(opts.density, "growth option density", 0.0, MAX_DENSITY, lo_open=True)
-    check_number(opts.leaf_density, "growth option leaf_density", 0.0, MAX_LEAF_DENSITY)
+    opts = checked_options(options)
     hbl = session_hbl(ctx, session_id)
     check_size(hbl.lobes, opts)
     return hbl
