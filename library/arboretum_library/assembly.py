@@ -33,7 +33,7 @@ differences of two such samples (up to 2e7 m) plus lobe hulls reaching at most t
 spread beyond them (up to 2e4 m), so 1e8 m never refuses a sketch, while a placed one (scale up to 1e6,
 translation up to 1e7 m) stays far inside float32 and float64. Library examples are not bounded by it:
 decomposed without a target height they keep the scan's frame and units, up to 1e12
-(``decompose.preprocess.MAX_COORDINATE``)."""
+(``pointio.MAX_COORDINATE``)."""
 
 
 def _check_scale(where: str, s: float) -> None:

@@ -136,9 +136,9 @@ class ReadOptions:
 
 
 MAX_COORDINATE = 1e12
-"""Largest coordinate magnitude ``read_points`` accepts, in any unit (the limit of ``arboretum
-decompose``, ``decompose.preprocess.MAX_COORDINATE``): geocentric coordinates in millimetres stay under
-1e10, while near 1e154 squared distances, and near 1e308 extents, overflow float64."""
+"""Largest coordinate magnitude ``read_points`` and ``arboretum decompose`` (for arrays given it
+directly) accept, in any unit: geocentric coordinates in millimetres stay under 1e10, while near 1e154
+squared distances, and near 1e308 extents, overflow float64."""
 
 AUTO_Y_CONFIDENCE = 0.75
 """With ``up='auto'`` a file is turned from Y up only when ``guess_up_axis`` says 'y' this surely."""

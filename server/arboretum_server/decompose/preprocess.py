@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from arboretum_library.errors import InputError
+from arboretum_library.pointio import MAX_COORDINATE
 
 from .columns import Column, trunk_columns
 from .options import WORK_HEIGHT, DecomposeOptions
@@ -31,9 +32,6 @@ GROUND_WIDER = 3.0
 GROUND_BELOW = 0.01
 """At most this fraction of the points lies below the ground (a plane through the underside of a crown
 has the trunk below it)."""
-MAX_COORDINATE = 1e12
-"""Largest coordinate magnitude read as a point (geocentric coordinates in millimetres stay under
-1e10); beyond it squared distances overflow float64 long before 1e154."""
 @dataclass(frozen=True, eq=False)
 class Prepared:
     """A cloud ready for decomposition, in the normalised frame."""
