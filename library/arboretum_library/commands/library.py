@@ -19,7 +19,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from arboretum_library.cli import add_json_flag, emit, register_extensions, tell
+from arboretum_library.cli import add_json_flag, counted, emit, register_extensions, tell
 
 
 def register(subparsers: Any) -> None:
@@ -54,6 +54,8 @@ def register(subparsers: Any) -> None:
     register_extensions(sub, "arboretum.library_commands")
     extra = "".join(f"    {usage_line(f'arboretum library {name}', p)}\n"
                     for name, p in sub.choices.items() if name not in own)
+    if _LAST_USAGE not in __doc__:  # a developer's edit of the docstring: fail in every CLI test, not silently
+        raise RuntimeError("commands/library.py: _LAST_USAGE must be the docstring's last usage line")
     parser.description = __doc__.replace(_LAST_USAGE, _LAST_USAGE + extra)
 
 
@@ -194,8 +196,7 @@ def _export(args: argparse.Namespace) -> tuple[dict, str]:
     check_output(args.archive, "ARCHIVE", libraries=[args.library])
     with _open(args.library) as lib:
         out = lib.export_archive(args.archive, progress=StatusLine())
-    n = out["examples"]
-    return out, f"exported {n} example{'s' * (n != 1)} to {out['archive']} ({out['size_bytes']} bytes)"
+    return out, f"exported {counted(out['examples'], 'example')} to {out['archive']} ({out['size_bytes']} bytes)"
 
 
 def _import(args: argparse.Namespace) -> tuple[dict, str]:

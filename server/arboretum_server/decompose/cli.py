@@ -196,11 +196,9 @@ def _text(d: dict) -> str:
         f"time: {steps} (total {sum(d['timing_s'].values()):.2f} s)",
     ]
     if d["library"]:
-        n = len(d["stored"])
-        lines.append(f"stored {n} example{'s' * (n != 1)} in {d['library']}: {', '.join(d['stored'])}")
+        lines.append(f"stored {counted(len(d['stored']), 'example')} in {d['library']}: {', '.join(d['stored'])}")
     else:
-        n = len(d["examples"])
-        lines.append(f"{n} example{'s' * (n != 1)} made (not stored: no --library given)")
+        lines.append(f"{counted(len(d['examples']), 'example')} made (not stored: no --library given)")
     if d["hbl"]:
         lines.append(f"whole-tree HBL saved to {d['hbl']}")
     lines += [f"note: {n}" for n in d["notes"]]
