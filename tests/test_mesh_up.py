@@ -110,9 +110,9 @@ def test_modules_passes_up_to_its_crown(files, monkeypatch, tmp_path, capsys):
 
     real = meshio.load_mesh
 
-    def stop(path, what="module mesh", up="auto", guess=True):
+    def stop(path, what="module mesh", up="auto", headerless=None):
         if what != "--crown":
-            return real(path, what, up, guess)  # the bundled module meshes
+            return real(path, what, up, headerless)  # the bundled module meshes
         seen.append(up)
         raise InputError("stop here")
 
@@ -147,8 +147,8 @@ def test_module_meshes_are_never_guessed(tmp_path):
     verts = np.vstack([card + [0, 0.001 * i, 0] for i in range(3)])
     faces = np.vstack([[4 * i, 4 * i + 1, 4 * i + 2] for i in range(3)] + [[4 * i, 4 * i + 2, 4 * i + 3] for i in range(3)])
     path = _write_obj(tmp_path / "leaf.obj", verts, faces)
-    assert mesh_up_axis(path, verts, guess=False) == "y"
-    v, _ = load_mesh(path, guess=False)
+    assert mesh_up_axis(path, verts, headerless="auto") == "y"
+    v, _ = load_mesh(path, headerless="auto")
     np.testing.assert_allclose(np.ptp(v, axis=0)[1], 0.12, atol=1e-6)  # the card's length lies along -Y
 
 

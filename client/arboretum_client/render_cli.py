@@ -100,7 +100,6 @@ def read_input(path: Path, style, textures: bool = True, up: str = "auto"):
     an origin (3,) to the input's Scene relative to it (see ``load_scene``). ``up``: the up axis of a
     point cloud, .obj or .ply (``--up``)."""
     from arboretum_library.export.mesh_up import mesh_up_axis
-    from arboretum_library.geometry import yup_to_zup
 
     from .scene_build import glb_scene, hbl_points, hbl_scene, mesh_scene, points_scene
 
@@ -118,10 +117,9 @@ def read_input(path: Path, style, textures: bool = True, up: str = "auto"):
         hbl = load_hbl(path)
         return _corners(hbl_points(hbl)), lambda o: hbl_scene(hbl, style, origin=o)
     if ext in (".obj", ".ply"):
-        verts, faces = read_obj(path, up) if ext == ".obj" else read_ply(path)
+        verts, faces = _stored_obj(path) if ext == ".obj" else read_ply(path)
         if len(faces):
-            if ext == ".ply" and mesh_up_axis(path, verts, up) == "y":
-                verts = yup_to_zup(verts)
+            verts = upright(path, verts, up)
             return _corners(verts), lambda o: mesh_scene(verts, faces, grid=False, origin=o)
     points, colors = read_point_cloud(path, up)
     return _corners(points), lambda o: points_scene(points, colors, grid=False, origin=o)
@@ -190,11 +188,23 @@ def read_ply(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 def read_obj(path: Path, up: str = "auto") -> tuple[np.ndarray, np.ndarray]:
     """Vertices (V, 3) float64 Z up and triangles (F, 3) of a Wavefront .obj (v and f lines only); its up
-    axis by ``up`` (``export.mesh_up.mesh_up_axis``: by default Arboretum's header, else Y up unless
-    the vertices surely stand along Z)."""
+    axis by ``up`` (``upright``)."""
+    verts, faces = _stored_obj(path)
+    return upright(path, verts, up), faces
+
+
+def upright(path: Path, verts: np.ndarray, up: str = "auto") -> np.ndarray:
+    """``verts`` (V, 3) of the .obj or .ply mesh ``path``, as stored, turned Z up when its up axis
+    (``export.mesh_up.mesh_up_axis``: ``up``, else Arboretum's header, else the format's usual axis unless
+    the vertices surely stand along the other) is Y."""
     from arboretum_library.export.mesh_up import mesh_up_axis
     from arboretum_library.geometry import yup_to_zup
 
+    return yup_to_zup(verts) if mesh_up_axis(path, verts, up) == "y" else verts
+
+
+def _stored_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 3) float64 as stored and triangles (F, 3) of a Wavefront .obj (v and f lines only)."""
     verts, polys = [], []
     for line in path.read_text(errors="replace").splitlines():
         parts = line.split()
@@ -206,9 +216,7 @@ def read_obj(path: Path, up: str = "auto") -> tuple[np.ndarray, np.ndarray]:
         raise InputError(f"{path}: an OBJ needs 'v' and 'f' lines, found {len(verts)} and {len(polys)}")
     nv = len(verts)
     polys = [np.where(p < 0, nv + p, p - 1) for p in polys]  # 1-based, negatives count from the end
-    verts = np.asarray(verts, np.float64)
-    flat = _triangulate(polys, nv, path)
-    return (yup_to_zup(verts) if mesh_up_axis(path, verts, up) == "y" else verts), flat
+    return np.asarray(verts, np.float64), _triangulate(polys, nv, path)
 
 
 def _triangulate(polys: list[np.ndarray], n_verts: int, path: Path) -> np.ndarray:

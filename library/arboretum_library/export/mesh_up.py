@@ -19,17 +19,15 @@ from pathlib import Path
 import numpy as np
 
 from arboretum_library.errors import InputError
+from arboretum_library.pointio import AUTO_Y_CONFIDENCE
 from arboretum_library.pointio_spatial import guess_up_axis
 
 from .obj import obj_header_axis
 
 UP_CHOICES = ("auto", "y", "z")
-"""The values of ``--up`` for mesh inputs."""
-SURE = 0.75
-"""``auto`` leaves a format's usual axis only when ``guess_up_axis`` is this sure of the other (as
-``pointio.AUTO_Y_CONFIDENCE`` for point clouds)."""
-
-
+"""The values of ``--up`` for mesh inputs (``auto`` leaves a format's usual axis only when
+``guess_up_axis`` is as sure of the other as a point cloud's ``--up auto`` must be:
+``pointio.AUTO_Y_CONFIDENCE``)."""
 _PLY_HEADER = re.compile(r"comment arboretum\b.*\b([YZ]) up\b", re.IGNORECASE)
 
 
@@ -51,14 +49,15 @@ def header_axis(path: str | os.PathLike) -> str | None:
 
 
 def mesh_up_axis(path: str | os.PathLike, vertices: np.ndarray, up: str = "auto", what: str = "INPUT",
-                 guess: bool = True) -> str:
+                 headerless: str | None = None) -> str:
     """'y' or 'z': the up axis of the mesh file ``path`` whose vertices (V, 3) are ``vertices`` as stored.
 
     ``up`` is 'auto', 'y' or 'z' (see the module doc); 'y' or 'z' for a glTF file other than its own
-    'y' is an ``InputError`` naming ``what``. ``guess=False``: 'auto' never looks at the vertices (module
-    meshes, branch pieces and leaf cards, whose shape says nothing of their up axis).
+    'y' is an ``InputError`` naming ``what``. ``headerless`` ('auto', 'y' or 'z'; module pieces, whose
+    shape says nothing of their up axis): Arboretum's header decides, else this axis ('auto': the
+    format's usual one), never the vertices.
     """
-    if up not in UP_CHOICES:
+    if up not in UP_CHOICES or headerless not in (None, *UP_CHOICES):
         raise InputError(f"--up must be one of {', '.join(UP_CHOICES)}, got {up!r}")
     path = Path(path)
     suffix = path.suffix.lower()
@@ -72,10 +71,10 @@ def mesh_up_axis(path: str | os.PathLike, vertices: np.ndarray, up: str = "auto"
     header = header_axis(path)
     if header is not None:
         return header
-    if not guess:
-        return usual
+    if headerless is not None:
+        return usual if headerless == "auto" else headerless
     v = np.asarray(vertices, np.float64).reshape(-1, 3)
     if len(v) < 8 or not np.isfinite(v).all():
         return usual
     axis, confidence = guess_up_axis(v)
-    return axis if axis != usual and confidence >= SURE else usual
+    return axis if axis != usual and confidence >= AUTO_Y_CONFIDENCE else usual

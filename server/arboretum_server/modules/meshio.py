@@ -15,14 +15,14 @@ from arboretum_library.geometry import yup_to_zup
 
 
 def load_mesh(path: str | Path, what: str = "module mesh", up: str = "auto",
-              guess: bool = True) -> tuple[np.ndarray, np.ndarray]:
+              headerless: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (V, 3) float64 Z up and faces (F, 3) int32 of the mesh in ``path`` (.obj, .glb, .gltf,
     .ply); errors name it as ``what`` (e.g. ``--crown``).
 
     ``up`` ('auto', 'y', 'z'; ``arboretum_library.export.mesh_up.mesh_up_axis``): glTF is Y up; OBJ is
     read by its Arboretum header (``save_obj``'s module files say Z up), else Y up as Blender and Maya
-    write it, and PLY Z up, unless the vertices surely stand along the other axis (not with
-    ``guess=False``: module meshes). Coincident vertices are merged.
+    write it, and PLY Z up, unless the vertices surely stand along the other axis (``headerless``:
+    module pieces, read by header or that axis, never by shape). Coincident vertices are merged.
     """
     import trimesh
 
@@ -41,7 +41,7 @@ def load_mesh(path: str | Path, what: str = "module mesh", up: str = "auto",
     faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int32).reshape(-1, 3)
     if len(faces) == 0:
         raise InputError(f"{what} {path}: has no triangles (a point cloud? give a closed mesh)")
-    if mesh_up_axis(path, vertices, up, what, guess) == "y":
+    if mesh_up_axis(path, vertices, up, what, headerless) == "y":
         vertices = yup_to_zup(vertices)
     return vertices, faces
 

@@ -91,18 +91,13 @@ def load_module_set(folder: str | Path, up: str = "auto") -> ModuleSet:
     Pieces (branch segments, leaf cards) are never read by their shape (``mesh_up``'s guess): a file
     with Arboretum's header is read by it, any other by ``up`` ('y' or 'z', ``modules --modules-up``;
     'auto': the format's usual axis, OBJ Y up)."""
-    from arboretum_library.export.mesh_up import header_axis
-
     from .meshio import load_mesh
 
     folder = Path(folder)
     files = sorted(p for p in folder.glob("*") if p.suffix.lower() in (".obj", ".glb", ".gltf"))
     if not files:
         raise InputError(f"module folder {folder}: no .obj/.glb/.gltf files")
-    def axis(p: Path) -> str:  # a header, or glTF's own Y up, beats --modules-up
-        return "auto" if header_axis(p) or p.suffix.lower() in (".glb", ".gltf") else up
-
-    modules = tuple(make_module(p.stem, *load_mesh(p, "module mesh", axis(p), guess=False)) for p in files)
+    modules = tuple(make_module(p.stem, *load_mesh(p, "module mesh", headerless=up)) for p in files)
     if not any(not m.is_trunk for m in modules):
         raise InputError(f"module folder {folder}: no branch modules (only trunk_* files)")
     return ModuleSet(modules)
