@@ -82,12 +82,12 @@ def column_bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def _voxel_keys(points: np.ndarray, size: float, pad: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """An int64 key (N,) per point for cubic voxels of ``size``, and the key strides (3,)."""
-    ijk = np.floor((points - points.min(axis=0)) / size).astype(np.int64) + pad
-    dims = ijk.max(axis=0) + 1 + pad
-    strides = np.array([dims[1] * dims[2], dims[2], 1], dtype=np.int64)
-    return ijk @ strides, strides
+def voxel_keys(points: np.ndarray, size: float) -> np.ndarray:
+    """An int64 key (N,) per point of ``points`` (N, 3) for cubic voxels of side ``size`` from their
+    lowest corner: equal keys, one voxel."""
+    ijk = np.floor((points - points.min(axis=0)) / size).astype(np.int64)
+    dims = ijk.max(axis=0) + 1
+    return ijk @ np.array([dims[1] * dims[2], dims[2], 1], dtype=np.int64)
 
 
 def even_sample_indices(points: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -108,7 +108,7 @@ def even_sample_indices(points: np.ndarray, n: int, rng: np.random.Generator) ->
         if count <= max(200_000, 4 * n)
         else pts[rng.choice(count, max(200_000, 4 * n), replace=False)]
     )
-    keys, _ = _voxel_keys(pts, _voxel_size_for(probe, n))
+    keys = voxel_keys(pts, _voxel_size_for(probe, n))
     order = _shuffled_argsort(keys, rng)
     sorted_keys = keys[order]
     first = np.concatenate([[True], sorted_keys[1:] != sorted_keys[:-1]])
@@ -129,7 +129,7 @@ def _voxel_size_for(pts: np.ndarray, n: int, steps: int = 10) -> float:
     lo, hi = np.log2(extent) - 20.0, np.log2(extent) + 0.01
     for _ in range(steps):
         mid = 0.5 * (lo + hi)
-        if np.unique(_voxel_keys(pts, 2.0**mid)[0]).size > n:
+        if np.unique(voxel_keys(pts, 2.0**mid)).size > n:
             lo = mid
         else:
             hi = mid

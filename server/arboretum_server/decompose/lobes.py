@@ -129,11 +129,11 @@ def thin(points: np.ndarray, cell: float) -> np.ndarray:
     the one farthest from their mean, so the outer points that shape the hull stay. Points dropped lie
     within a cell diagonal of a kept one, and seldom outside the hull: a cluster's outermost points
     are each the farthest of their cube."""
+    from arboretum_library.pointio_spatial import voxel_keys
+
     if cell <= 0 or not len(points):
         return points
-    key = np.floor((points - points.min(axis=0)) / cell).astype(np.int64)
-    span = key.max(axis=0) + 1
-    flat = (key[:, 0] * span[1] + key[:, 1]) * span[2] + key[:, 2]
+    flat = voxel_keys(points, cell)
     far = np.linalg.norm(points - points.mean(axis=0), axis=1)
     order = np.lexsort((-far, flat))
     first = np.ones(len(order), bool)
