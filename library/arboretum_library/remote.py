@@ -26,7 +26,7 @@ import numpy as np
 import zmq
 
 from . import protocol as P
-from .errors import ArboretumError, ProtocolError
+from .errors import ArboretumError, InputError, ProtocolError
 
 R = TypeVar("R", bound=P.Reply)
 ProgressCallback = Callable[[float, float, str], Any]
@@ -52,7 +52,6 @@ class Remote:
         self.timeout = timeout
         self.retries = retries
         if curve is None and curve_client is not None:
-            from .errors import InputError
 
             raise InputError(f"curve_client={curve_client!r} needs curve=KEYDIR")
         self._curve = client_keys(curve, curve_client) if curve is not None else None
@@ -210,7 +209,6 @@ def client_keys(curve: str | os.PathLike, name: str | None = None) -> tuple[byte
     else ``client.key_secret``, else its only client secret) or the path of one ``*.key_secret``; either
     way ``server.key`` lies next to the secret. ``InputError`` naming the file for a missing, unreadable or
     malformed key, and listing the secrets when several could be meant."""
-    from .errors import InputError
 
     path = Path(curve)
     if path.is_file():
@@ -234,7 +232,6 @@ def client_keys(curve: str | os.PathLike, name: str | None = None) -> tuple[byte
 
 def _choose_client(folder: Path, name: str | None) -> str:
     """The client key pair to use from ``folder`` (see ``client_keys``)."""
-    from .errors import InputError
 
     found = sorted(p.name[: -len(".key_secret")] for p in folder.glob("*.key_secret")
                    if p.name != "server.key_secret" and not p.name.startswith("."))
@@ -243,8 +240,10 @@ def _choose_client(folder: Path, name: str | None) -> str:
         if name not in found:
             raise InputError(f"{folder}: no {name}.key_secret (client secrets here: {listed})")
         return name
-    if CLIENT in found or len(found) == 1:
-        return CLIENT if CLIENT in found else found[0]
+    if CLIENT in found:
+        return CLIENT
+    if len(found) == 1:
+        return found[0]
     if not found:
         raise InputError(f"{folder}: needs server.key and a client *.key_secret (arboretum keys generate)")
     raise InputError(f"{folder}: holds several client secrets ({listed}) and no {CLIENT}.key_secret; choose one by "
@@ -258,7 +257,6 @@ def load_key(path: str | os.PathLike, *, secret: bool = False) -> tuple[bytes, b
     ``secret`` (a public-key file, the kind handed to others) when it holds a secret key too."""
     import zmq.auth
 
-    from .errors import InputError
 
     path = Path(path)
     try:
@@ -288,7 +286,6 @@ def _check_z85(path: Path, kind: str, key: bytes) -> None:
 
     from zmq.utils import z85
 
-    from .errors import InputError
 
     ok = len(key) == 40 and all(c in z85.Z85CHARS for c in key)
     try:

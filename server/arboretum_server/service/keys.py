@@ -17,12 +17,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from arboretum_library.cli import add_json_flag, emit
+from arboretum_library.cli import add_json_flag, emit, tell
 
 SERVER = "server"
 """Base name of the server's key files (``server.key``, ``server.key_secret``): no client may use it."""
@@ -161,7 +160,6 @@ def _write_temp(path: Path, kind: str, keys: str, mode: int) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    paths = generate(args.dir, args.client, args.force, timeout=LOCK_TIMEOUT_S,
-                     on_wait=lambda msg: print(msg, file=sys.stderr, flush=True))
+    paths = generate(args.dir, args.client, args.force, timeout=LOCK_TIMEOUT_S, on_wait=tell)
     emit(args, paths, "\n".join(f"{k}: {v}" for k, v in paths.items()))
     return 0
