@@ -11,7 +11,7 @@ import pytest
 from arboretum_client.app import App
 from arboretum_client.script_check import check_action
 from arboretum_client.tools.state import REFINEMENT, ClientState
-from arboretum_client.ui_actions import SIMPLE, TAGS, TOGGLES, WITH_ARG
+from arboretum_client.ui_actions import SIMPLE, TAGS, WITH_ARG
 
 OUT = Path("/nowhere/out")
 EXPECTED_SIMPLE = {
@@ -107,7 +107,6 @@ def test_the_checker_refuses_arguments_outside_the_table():
     assert check_action("density:*") == "density: expects one of +, -, got '*'"
     assert check_action("choose:  ") == "choose: needs an example id, e.g. choose:oak-0001"
     assert check_action("search") is None and check_action("focus") is None
-    assert TAGS == ("straight", "curved", "dense", "sparse") and TOGGLES == ("show_points", "show_all")
 
 
 def test_every_shortcut_and_every_panel_button_is_an_action_the_checker_accepts():

@@ -175,23 +175,22 @@ class HBL:
             if lobe.branch >= len(self.branches):
                 raise ValidationError(f"HBL.lobes[{j}].branch: {lobe.branch} is out of range")
 
-    def arrays(self, radii: bool = True) -> Iterator[tuple[str, np.ndarray]]:
-        """(field path, array) of every coordinate (and, with ``radii``, every radius) the structure holds,
-        e.g. ``("lobes[2].hull_vertices", (V, 3) array)``: the root, source points, branch points and radii,
-        lobe points, hull vertices and centres (metres). Without ``radii``: exactly the arrays that
-        ``map_positions`` maps."""
+    def arrays(self) -> Iterator[tuple[str, np.ndarray]]:
+        """(field path, array) of every coordinate and radius the structure holds, e.g.
+        ``("lobes[2].hull_vertices", (V, 3) array)``: the root, source points, branch points and radii,
+        lobe points, hull vertices and centres (metres). All but the radii are what ``map_positions``
+        maps."""
         for name in _HBL_POSITIONS:
             yield name, getattr(self, name)
-        branch_fields = (*_BRANCH_POSITIONS, "radii") if radii else _BRANCH_POSITIONS
         for i, b in enumerate(self.branches):
-            for name in branch_fields:
+            for name in (*_BRANCH_POSITIONS, "radii"):
                 yield f"branches[{i}].{name}", getattr(b, name)
         for j, lb in enumerate(self.lobes):
             for name in _LOBE_POSITIONS:
                 yield f"lobes[{j}].{name}", getattr(lb, name)
 
     def map_positions(self, fn: Callable[[np.ndarray], Any]) -> HBL:
-        """A new (validated) HBL with every position array ``a`` of ``arrays(radii=False)`` replaced by
+        """A new (validated) HBL with every position array ``a`` of ``arrays()`` (all but radii) replaced by
         ``fn(a)`` (same shape), e.g. ``lambda a: a + offset`` to move it; radii, topology and labels kept."""
         def mapped(rec, names: tuple[str, ...]):
             return replace(rec, **{n: fn(getattr(rec, n)) for n in names})
