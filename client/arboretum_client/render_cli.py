@@ -26,8 +26,8 @@ import numpy as np
 from arboretum_library.checks import check_input_file
 from arboretum_library.cli import add_json_flag, emit
 from arboretum_library.errors import InputError
-from arboretum_library.export.mesh_up import UP_CHOICES
 from arboretum_library.outputs import check_output
+from arboretum_library.pointio import UP_CHOICES
 
 VIEW_CHOICES = ("front", "side", "top", "iso")
 

@@ -109,6 +109,10 @@ class PointCloud:
         return len(self.points)
 
 
+UP_CHOICES = ("auto", "z", "y")
+"""The up axes a file may be read with (``ReadOptions.up``, every command's ``--up``)."""
+
+
 @dataclass(frozen=True)
 class ReadOptions:
     """How ``read_points`` prepares a cloud. The defaults change nothing but the up axis."""
@@ -126,7 +130,7 @@ class ReadOptions:
     """Seed of the random choices in thinning."""
 
     def __post_init__(self) -> None:
-        if self.up not in ("auto", "z", "y"):
+        if self.up not in UP_CHOICES:
             raise InputError(f"up axis must be 'auto', 'z' or 'y', got {self.up!r}")
         th = self.target_height
         if th is not None and not (np.isfinite(th) and th > 0):

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 
 from arboretum_library.cli import add_json_flag, emit
+from arboretum_library.pointio import UP_CHOICES
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -22,7 +23,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _add_up(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--up",
-        choices=("auto", "z", "y"),
+        choices=UP_CHOICES,
         default="auto",
         help="up axis of the file: auto-detect (default), z, or y (converted to Z up)",
     )

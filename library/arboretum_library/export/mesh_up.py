@@ -19,15 +19,14 @@ from pathlib import Path
 import numpy as np
 
 from arboretum_library.errors import InputError
-from arboretum_library.pointio import AUTO_Y_CONFIDENCE
+from arboretum_library.pointio import AUTO_Y_CONFIDENCE, UP_CHOICES
 from arboretum_library.pointio_spatial import guess_up_axis
 
 from .obj import obj_header_axis
 
-UP_CHOICES = ("auto", "y", "z")
-"""The values of ``--up`` for mesh inputs (``auto`` leaves a format's usual axis only when
-``guess_up_axis`` is as sure of the other as a point cloud's ``--up auto`` must be:
-``pointio.AUTO_Y_CONFIDENCE``)."""
+# ``--up`` takes the point clouds' values (``pointio.UP_CHOICES``); ``auto`` leaves a format's usual axis
+# only when ``guess_up_axis`` is as sure of the other as a point cloud's ``--up auto`` must be
+# (``pointio.AUTO_Y_CONFIDENCE``).
 _PLY_HEADER = re.compile(r"comment arboretum\b.*\b([YZ]) up\b", re.IGNORECASE)
 
 

@@ -19,8 +19,7 @@ from contextlib import contextmanager
 
 from arboretum_library.checks import check_seed
 from arboretum_library.cli import add_json_flag, counted, emit, tell
-
-UP_CHOICES = ("auto", "z", "y")
+from arboretum_library.pointio import UP_CHOICES
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -12,8 +12,8 @@ from pathlib import Path
 
 from arboretum_library.cli import add_json_flag, emit
 from arboretum_library.errors import InputError
-from arboretum_library.export.mesh_up import UP_CHOICES
 from arboretum_library.outputs import check_output
+from arboretum_library.pointio import UP_CHOICES
 
 CROWN_FORMATS = (".obj", ".ply", ".glb", ".gltf")
 
