@@ -122,7 +122,7 @@ def test_interrupt_keeps_the_previous_export(tmp_path, monkeypatch):
         return real(src, dst)
 
     monkeypatch.setattr(obj.os, "replace", replace)
-    parts, mats = _scene()
+    parts, _ = _scene()
     mats = _swapped_textures()
     with pytest.raises(KeyboardInterrupt):
         write_obj(tmp_path / "tree.obj", parts[:1], mats)
