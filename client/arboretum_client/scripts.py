@@ -1,6 +1,6 @@
 """Run the client from a script of input events, headless (EGL), and take screenshots.
 
-A script is JSON (or YAML when PyYAML is installed): ``{"steps": [...]}`` or the bare list. Each step is
+A script is JSON (or YAML when PyYAML is installed; numbers as YAML 1.2 reads them, so ``1e-3`` is one): ``{"steps": [...]}`` or the bare list. Each step is
 one input on the same code path as a window (mouse/keys into ``App.handle``; VR-style hand samples into
 the hands model), followed by frames until the network worker is idle. Time is virtual: frames advance
 a clock by ``1 / fps`` seconds, so long presses are reproducible.
@@ -50,7 +50,9 @@ def load_script(path: str | Path) -> dict:
         if path.suffix in (".yaml", ".yml"):
             import yaml
 
-            data = yaml.safe_load(text)
+            from arboretum_library.yaml12 import with_yaml12_numbers
+
+            data = yaml.load(text, Loader=with_yaml12_numbers(yaml.SafeLoader))
         else:
             data = json.loads(text)
     except Exception as exc:

@@ -72,16 +72,11 @@ def read_script(path: str | Path) -> tuple[str, list[dict]]:
 def yaml_loader():
     """PyYAML's safe loader, reading numbers such as ``1e-3`` or ``1e300`` as numbers (YAML 1.2) where
     plain PyYAML (YAML 1.1) reads them as text: ``scale: 1e-3`` is a number in a script."""
-    import re
-
     import yaml
 
-    class Loader(yaml.SafeLoader):
-        pass
+    from arboretum_library.yaml12 import with_yaml12_numbers
 
-    exponent = re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$")
-    Loader.add_implicit_resolver("tag:yaml.org,2002:float", exponent, list("-+0123456789."))
-    return Loader
+    return with_yaml12_numbers(yaml.SafeLoader)
 
 
 def open_library(path: str | Path):
