@@ -366,7 +366,7 @@ def test_rerouted_kept_lobes_keep_their_places(leaf_on, monkeypatch, rounds):
 
 
 def test_insert_lobe_rebuilds_the_lobe_it_takes_from(leaf_on):
-    from arboretum_server.decompose.secondary import inside_foreign
+    from arboretum_server.decompose.clear import inside_foreign
 
     # The outer third of lobe 13 (by distance from the tree's axis): the lobe keeps its place with the
     # rest of its points, a new centre, hull and branch; no branch runs through a lobe it does not feed
@@ -379,7 +379,7 @@ def test_insert_lobe_rebuilds_the_lobe_it_takes_from(leaf_on):
     rest = np.sort(m[r < np.quantile(r, 0.67)])
     assert np.array_equal(np.sort(i.lobes[13].members), rest)
     # the lobe sits on the trunk's axis, so the new lobe is a ring round it that buries the mean: the
-    # centre moves to one of the lobe's own points outside every other lobe (secondary.part_overlaps)
+    # centre moves to one of the lobe's own points outside every other lobe (carve.part_overlaps)
     own, centre = d.points[rest], i.lobes[13].centre
     assert inside_foreign(list(i.lobes), 13, own.mean(axis=0)[None])[0]
     assert (np.abs(own - centre).sum(axis=1) < 1e-12).any()

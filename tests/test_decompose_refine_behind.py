@@ -35,9 +35,9 @@ def test_a_lobe_behind_another_new_lobe_gets_a_branch_that_crosses_no_lobe(leaf_
     # Lobe 6 of the leaf-on pine: its outer third (inserted) or outer half (split off) lies behind the
     # rest of the lobe, seen from the trunk; before, every repair failed and the new lobe's branch ran
     # up the trunk through 3 trunk-wrapped lobes and the rest of lobe 6 (up to 3.4 cm deep at 0.8 m).
+    from arboretum_server.decompose.clear import foreign
     from arboretum_server.decompose.evaluate import connected, crossings
     from arboretum_server.decompose.refine import insert_lobe, split_lobe
-    from arboretum_server.decompose.secondary import foreign
 
     d = leaf_on_pine
     outer, strokes = _outer_third_and_halves(d, 6)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from arboretum_server.decompose import secondary
+from arboretum_server.decompose import carve
 from arboretum_server.decompose.evaluate import signed_distances
 from arboretum_server.decompose.lobes import DENSE, THIN, Tetrahedra, plain_hull, thin
 
@@ -62,5 +62,5 @@ def test_a_thinned_lobe_is_recalled_by_its_points(rng):
     pts = _crown_patch(rng, 3000)
     members = np.arange(len(pts))
     tet = Tetrahedra(pts, RADIUS / THIN)
-    secondary.remember_plain(members, tet)
-    assert secondary._recall_plain(members, pts) is tet  # by the cluster's points, not the thinned ones
+    carve.remember_plain(members, tet)
+    assert carve._recall_plain(members, pts) is tet  # by the cluster's points, not the thinned ones

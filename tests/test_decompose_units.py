@@ -269,9 +269,9 @@ def _box_lobe(lo, hi, pts_index, pts):
 
 
 def test_bent_fallback_goes_round_a_wall_that_blocks_every_straight_branch():
+    from arboretum_server.decompose.clear import bent_fallback, inside_foreign
+    from arboretum_server.decompose.clear import straight_fallback as straight
     from arboretum_server.decompose.merge import BranchSet, add_branch, resample_step
-    from arboretum_server.decompose.secondary import bent_fallback, inside_foreign
-    from arboretum_server.decompose.secondary import straight_fallback as straight
 
     own_pts = np.array([[1.5, 0.0, z] for z in np.linspace(0.1, 1.9, 19)])  # a tall column of foliage
     wall_pts = np.array([[0.5, 0.0, 0.6]])
@@ -326,8 +326,8 @@ def _ring_round_trunk(rng, x: float, half: float):
 
 
 def test_unwrap_carves_the_trunk_out_of_a_lobe_wrapped_round_it(rng):
+    from arboretum_server.decompose.carve import unwrap
     from arboretum_server.decompose.merge import resample_step
-    from arboretum_server.decompose.secondary import unwrap
 
     pts, lobes, mains = _ring_round_trunk(rng, 0.15, 0.02)
     wrapped, beside = lobes
@@ -344,7 +344,8 @@ def test_carving_is_undone_when_it_does_not_clear_the_lobe_and_skipped_for_a_bur
     # the trunk and the lobe outside it, so the carve is undone. A lobe whose centre lies inside another
     # (inserted among its points) is not even tried.
     from arboretum_server.decompose import secondary
-    from arboretum_server.decompose.secondary import _unwrapped_fallback, boxes
+    from arboretum_server.decompose.clear import boxes
+    from arboretum_server.decompose.secondary import _unwrapped_fallback
     from arboretum_server.decompose.state import LobeState
 
     pts, lobes, mains = _ring_round_trunk(rng, 0.12, 0.01)
@@ -365,8 +366,8 @@ def test_unwrap_never_grows_a_lobe(seed, carved):
     # Clusters round a trunk; 14, 30 and 69 close their carved shape only at a larger probe radius than
     # their plain one (found by search: 5 of 120 such clusters grew when every radius step was allowed)
     # and are kept; 0 is carved. A grown lobe could swallow a branch already checked clear of it.
+    from arboretum_server.decompose.carve import unwrap
     from arboretum_server.decompose.merge import BranchSet, add_branch
-    from arboretum_server.decompose.secondary import unwrap
     from arboretum_server.decompose.state import LobeState
 
     rng = np.random.default_rng(seed)
@@ -389,9 +390,10 @@ def test_a_new_lobe_beside_a_trunk_wrapped_by_a_kept_lobe_gets_a_clear_branch(rn
     # Refinement: the kept lobe's foliage flanks the trunk on both sides (+-y), and its alpha shape fills
     # the gap, trunk included; the new lobe lies along +x. Every route from the trunk starts inside the
     # kept lobe until make_lobes carves the trunk out of it.
+    from arboretum_server.decompose.clear import inside_foreign
     from arboretum_server.decompose.merge import BranchSet, add_branch, resample_step
     from arboretum_server.decompose.pipeline import centre_grid
-    from arboretum_server.decompose.secondary import inside_foreign, make_lobes, zones
+    from arboretum_server.decompose.secondary import make_lobes, zones
     from arboretum_server.decompose.state import LobeState
 
     side = np.where(rng.random(300) < 0.5, -1, 1)
@@ -502,8 +504,9 @@ def test_part_overlaps_frees_a_centre_buried_in_a_neighbour(rng):
     # alpha shape (probe 7.7 cm, larger than the shell) fills the hole and buries the ball's centre,
     # so no branch could reach it. Afterwards the centre lies in no other lobe, the shell has not grown,
     # and the centre is the ball's mean or one of its own points.
+    from arboretum_server.decompose.carve import part_overlaps
+    from arboretum_server.decompose.clear import inside_foreign
     from arboretum_server.decompose.merge import BranchSet, add_branch
-    from arboretum_server.decompose.secondary import inside_foreign, part_overlaps
     from arboretum_server.decompose.state import LobeState
 
     c = np.array([0.12, 0.0, 0.2])
@@ -637,20 +640,20 @@ def test_tetrahedra_without_blockers_match_a_tetrahedralisation_with_them(rng):
 def test_lobes_remember_their_tetrahedralisation_while_their_points_do(rng):
     import gc
 
-    from arboretum_server.decompose import secondary
+    from arboretum_server.decompose import carve
     from arboretum_server.decompose.lobes import Tetrahedra
 
     pts = rng.normal(0, 0.03, (200, 3))
     members = np.arange(150)
     tet = Tetrahedra(pts[members])
-    secondary.remember_plain(members, tet)
-    assert secondary._recall_plain(members, pts[members]) is tet
-    assert secondary._recall_plain(members.copy(), pts[members]) is None  # another array, the same points
-    assert secondary._recall_plain(members, pts[members] + 0.01) is None  # the same array over other points
+    carve.remember_plain(members, tet)
+    assert carve._recall_plain(members, pts[members]) is tet
+    assert carve._recall_plain(members.copy(), pts[members]) is None  # another array, the same points
+    assert carve._recall_plain(members, pts[members] + 0.01) is None  # the same array over other points
     key = id(members)
     del members
     gc.collect()
-    assert key not in secondary._PLAIN  # gone with the lobe's points
+    assert key not in carve._PLAIN  # gone with the lobe's points
 
 
 @pytest.mark.parametrize(("kind", "off"), [("column", None), ("wide", "NARROW"), ("gappy", "FULL"), ("sparse", "FULL")])

@@ -7,7 +7,7 @@ boundary is always closed (watertight), unlike open3d's alpha meshes of surface-
 (FACTS.md). When the kept tetrahedra miss more than ``MIN_COVER`` of the cluster's points, or the
 cluster is degenerate (fewer than 4 points, flat), we fall back to the convex hull (jittered for flat or
 tiny clusters), oriented outward. A *carved* alpha shape (``carved_hull``) also keeps out of given
-blocker points (main-branch wood a lobe wraps round, ``secondary.unwrap``).
+blocker points (main-branch wood a lobe wraps round, ``carve.unwrap``).
 """
 
 from __future__ import annotations

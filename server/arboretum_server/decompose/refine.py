@@ -2,7 +2,7 @@
 split lobes. Each is a pure function ``Decomposition -> Decomposition`` that redoes only what it must:
 hulls and secondary branches of the lobes it creates (one Dijkstra on the cached graph, Algorithm 1
 step 2 against the cached main branches; a kept lobe wrapped round the main branch where a new branch
-must start is carved, ``secondary.unwrap``), then the radii and records. A lobe that loses points to
+must start is carved, ``carve.unwrap``), then the radii and records. A lobe that loses points to
 ``insert_lobe`` is rebuilt like a new one (centre, hull, branch). A kept lobe's branch that would run
 through a new lobe is carved out of it (``_give_way``), or, when that fails, routed again with them.
 A new lobe's branch that no repair clears (it lies behind another new lobe: the outer part of a lobe,
@@ -22,18 +22,11 @@ import numpy as np
 
 from arboretum_library.errors import InputError
 
+from .carve import carve_lobe
+from .clear import bent_fallback, boxes, foreign, straight_fallback
 from .lobes import inside, kmeans
 from .merge import resample_step, sample_polylines
-from .secondary import (
-    bent_fallback,
-    boxes,
-    carve_lobe,
-    foreign,
-    make_lobes,
-    straight_fallback,
-    zone_sources,
-    zones,
-)
+from .secondary import make_lobes, zone_sources, zones
 from .state import Decomposition, LobeState, build_hbl
 
 ROUTE_ROUNDS = 3

@@ -1,0 +1,121 @@
+"""Lobes carved round what must pass through them (ours; VRTree's alpha shapes have no such step).
+
+An alpha shape fills the gap where a main branch runs through its foliage, and the alpha shapes of a
+lobe a user inserts and the lobe its points came from overlap. ``unwrap`` rebuilds the foreign lobes
+wrapped round the main branches near a lobe's centre with that wood carved out; ``part_overlaps`` carves
+a lobe round a new lobe whose centre it buried. Both go through ``carve_lobe`` (``lobes.carved_hull``),
+which reuses each lobe's plain tetrahedralisation (``remember_plain``) while its members array lives.
+"""
+
+from __future__ import annotations
+
+import weakref
+from dataclasses import replace
+
+import numpy as np
+
+from .clear import boxes, inside_foreign, main_vertices
+from .lobes import RADIUS_STEPS, Tetrahedra, carved_hull, inside, plain_steps
+from .merge import BranchSet, sample_polylines
+from .state import LobeState
+
+
+def unwrap(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, radius: float,
+           near: int = 64, step: float = 0.005) -> int:
+    """Carve the main branches out of the foreign lobes that enclose one of the ``near`` main-branch
+    vertices nearest lobe ``j``'s centre (the starts ``straight_fallback`` tries); returns how many lobes
+    changed (``lobes`` is updated in place).
+
+    A lobe's alpha shape (probe radius 7.7 cm at the 0.8 m scale) fills the gap where a main branch runs
+    through its foliage, so a secondary branch leaving that main branch starts inside a lobe it does not
+    feed (the pine's lobes wrap its trunk). Each such lobe is rebuilt with the main branches (resampled
+    every ``step``) within one probe radius of its points as blockers (``lobes.carved_hull``), at most at
+    the probe radius its plain alpha shape used: it then reaches up to the wood but not across it, and
+    lies inside the hull it replaces, so no other branch starts crossing. Only hulls change (members,
+    centres and branches stay); a lobe wrapped round a trunk can lose its own centre to the tunnel. The
+    same blockers every time, so carving a lobe again gives the same shape. A lobe whose carved shape is
+    not a closed one-piece surface is kept.
+    """
+    if not mains.segments:
+        return 0
+    verts = main_vertices(mains)[0]
+    near_pts = verts[np.argsort(np.linalg.norm(verts - lobes[j].centre, axis=1))[:near]]
+    wood = sample_polylines(mains.segments, step)
+    changed = 0
+    for k in range(len(lobes)):
+        lb = lobes[k]
+        if k == j:
+            continue
+        lo, hi = lb.hull_vertices.min(axis=0), lb.hull_vertices.max(axis=0)
+        c = near_pts[((near_pts > lo) & (near_pts < hi)).all(axis=1)]
+        if not len(c) or not inside(lb.hull_vertices, lb.hull_faces, c).any():
+            continue
+        if carve_lobe(lobes, k, pts, wood, radius):
+            changed += 1
+    return changed
+
+
+_PLAIN: dict[int, tuple[weakref.ref, Tetrahedra]] = {}
+"""The plain tetrahedralisation of each lobe, by the id of its ``members`` array, while that array lives
+(kept lobes share it across refinements; not part of ``LobeState``, so it never travels with one)."""
+
+
+def remember_plain(members: np.ndarray, tet: Tetrahedra) -> None:
+    """Keep ``tet`` (``Tetrahedra`` of the points ``members`` indexes) for ``carve_lobe`` while ``members`` lives."""
+    key = id(members)
+
+    def forget(ref: weakref.ref, key: int = key) -> None:
+        if _PLAIN.get(key, (None,))[0] is ref:
+            del _PLAIN[key]
+
+    _PLAIN[key] = (weakref.ref(members, forget), tet)
+
+
+def _recall_plain(members: np.ndarray, points: np.ndarray) -> Tetrahedra | None:
+    """The ``Tetrahedra`` remembered for ``members`` if it was built from ``points`` (its lobe's points)."""
+    hit = _PLAIN.get(id(members))
+    ok = hit is not None and hit[0]() is members and np.array_equal(hit[1].source, points)
+    return hit[1] if ok else None
+
+
+def carve_lobe(lobes: list[LobeState], k: int, pts: np.ndarray, blockers: np.ndarray, radius: float) -> bool:
+    """Rebuild lobe ``k``'s hull with the ``blockers`` (B, 3) within one probe radius of its points kept
+    out, at most at its plain probe radius (in place); False when the carved shape is not usable."""
+    lb = lobes[k]
+    members = pts[lb.members]
+    lo, hi = members.min(axis=0) - radius, members.max(axis=0) + radius
+    near = blockers[((blockers > lo) & (blockers < hi)).all(axis=1)]
+    steps = lb.steps if lb.steps is not None else plain_steps(members, radius) if lb.alpha else RADIUS_STEPS
+    shape = carved_hull(members, radius, near, steps, _recall_plain(lb.members, members))
+    if shape is None:
+        return False
+    lobes[k] = replace(lb, hull_vertices=shape[0], hull_faces=shape[1], alpha=True)
+    return True
+
+
+def part_overlaps(lobes: list[LobeState], start: int, mains: BranchSet, pts: np.ndarray, radius: float,
+                  step: float = 0.005) -> int:
+    """For each lobe from ``start`` on whose centre lies inside another lobe, carve that lobe with the
+    first one's points and the main branches as blockers (in place); returns how many hulls changed.
+
+    k-means clusters never need it (no centre of the decomposed test trees lies in another lobe), but
+    points a user selects for ``insert_lobe`` border the lobe they came from, and the two alpha shapes
+    (probe radius about a lobe's size) overlap: neither branch could reach its centre. Carving fails
+    when the blockers split the shape; then the lobe's centre moves to its own point nearest the old
+    centre outside every other lobe (its branch ends there), when it has one.
+    """
+    wood = sample_polylines(mains.segments, step)
+    changed = 0
+    for j in range(start, len(lobes)):
+        c = lobes[j].centre[None]
+        lo, hi = boxes(lobes)
+        for k in np.flatnonzero(((c > lo) & (c < hi)).all(axis=1)):
+            if k == j or not inside(lobes[k].hull_vertices, lobes[k].hull_faces, c).any():
+                continue
+            changed += carve_lobe(lobes, int(k), pts, np.concatenate([pts[lobes[j].members], wood]), radius)
+        if inside_foreign(lobes, j, c)[0]:
+            own = pts[lobes[j].members]
+            free = own[~inside_foreign(lobes, j, own)]
+            if len(free):
+                lobes[j] = replace(lobes[j], centre=free[np.argmin(np.linalg.norm(free - c, axis=1))])
+    return changed
