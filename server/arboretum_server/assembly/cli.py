@@ -14,9 +14,10 @@ Each operation is a one-key map, run by the same handlers as the server, in-proc
 
 A transform is ``T`` (a 4x4 matrix) or ``at`` (translation, metres), ``rotate`` ([axis x, y, z, degrees])
 or ``rotate_z`` (degrees) and ``scale``; ``transform`` and ``transform_lobe`` keep the current value of
-each of them left out. The whole script is checked before it runs (``script_check``); exports are
-written aside and moved into place, after ``--out``, only once every operation succeeded (``script``),
-with Ctrl-C held back meanwhile: an interrupt leaves the old files or the new ones, never a mix.
+each of them left out. The whole script is checked before it runs (``script_check``); exports and
+``--out`` are written aside and moved into place only once every operation succeeded, all or none
+(``script.swap``): a Ctrl-C (held back meanwhile) or a file that cannot be replaced leaves the old
+files or the new ones, never a mix.
 ``--out`` writes the session (an Assembly record, .npz; another suffix is refused).
 """
 
@@ -123,8 +124,8 @@ def run(args: argparse.Namespace) -> int:
             results = [runner.run(op, None if args.json else StatusLine()) for op in checked]
             assembly = runner.assembly()
             with interruptible():  # a Ctrl-C waits: --out and every export are replaced together, or none
-                save_record(args.out, assembly)
-                runner.commit()  # the exports' files, written aside until now, are moved into place
+                runner.stage(Path(args.out), "--out", lambda tmp: save_record(tmp, assembly))
+                runner.commit()  # and so does a file that cannot be replaced (script.swap)
         finally:
             runner.close()
     data: dict[str, Any] = {

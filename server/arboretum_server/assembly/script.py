@@ -7,14 +7,26 @@ Three rules on top of the handlers, for a pipeline that runs a script and trusts
   when left out, read from the session as the operation runs;
 - the session an ``undo`` can go back to is the one the script started from: undoing the loading of a
   ``--from`` session is "nothing to undo", as in a fresh script;
-- an export writes its file beside its destination under a hidden temporary name; ``commit`` renames
-  every such file into place once all operations succeeded (Ctrl-C held back until the last rename),
-  and ``close`` removes those left, so a script that fails (or is interrupted) leaves no export behind.
+- an export (and ``--out``, through ``stage``) writes its file beside its destination under a hidden
+  temporary name, ``.NAME.PID-N.tmp``; ``commit`` puts every such file in place once all operations
+  succeeded, all or none (``swap``), and ``close`` removes those left, so a script that fails (or is
+  interrupted) leaves no export behind.
+
+``swap`` (``atomic.replace_all``) first keeps each destination's present file under a second hidden
+name, ``.NAME.PID-N.old`` (a hard link, so the destination stays in place; moved aside where the folder
+has no hard links), then renames the new files in. An ``OSError`` at any step (a folder made read-only, a destination that
+became a folder, a full disk) undoes the steps done, in reverse: every destination holds what it held
+before (a missing one is missing again), the temporary files go, and one ``InputError`` names the
+destination and the problem. On success the ``.old`` files go. Ctrl-C is held back over the whole
+swap. A SIGKILL during it can leave ``.NAME.PID-N.tmp`` (the new file) and ``.NAME.PID-N.old`` (the
+previous one) beside a destination; neither is ever read, and either may be removed.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -22,7 +34,7 @@ import numpy as np
 
 from arboretum_library import protocol as P
 from arboretum_library.assembly import Assembly, Placement
-from arboretum_library.atomic import interruptible
+from arboretum_library.atomic import NotReplaced, replace_all
 from arboretum_library.errors import ArboretumError, InputError
 from arboretum_library.geometry import make_transform
 
@@ -54,6 +66,29 @@ def lobe_posed(pose: Pose, T_example_lobe: np.ndarray) -> np.ndarray:
     return make_transform(R, t, s if pose.scale is None else pose.scale)
 
 
+@dataclass(frozen=True)
+class Staged:
+    """A file written aside, waiting for ``commit``."""
+
+    tmp: Path
+    """The new file: ``.NAME.PID-N.tmp`` beside ``out``."""
+    out: Path
+    """Its destination, as the user named it."""
+    what: str
+    """What names it in an error: ``--out`` or ``operation 3 (export): out``."""
+
+
+def swap(staged: list[Staged]) -> None:
+    """Put every staged file in place, all or none (``atomic.replace_all``, Ctrl-C held back);
+    ``InputError`` naming the destination and the problem when one cannot be replaced."""
+    try:
+        replace_all([(s.tmp, s.out) for s in staged])
+    except NotReplaced as exc:
+        failed = staged[exc.index]
+        raise InputError(f"{failed.what} {failed.out}: cannot be replaced ({exc.strerror}); "
+                         + (exc.lost or "no file was changed")) from None
+
+
 class Runner:
     """A server context of its own (library, a session in a temporary state folder) for one script."""
 
@@ -69,8 +104,8 @@ class Runner:
         self.dispatch = Dispatcher(self.ctx)
         self.depth = 0
         """Edits since the start that ``undo`` may take back."""
-        self.staged: list[tuple[Path, Path]] = []
-        """(temporary file, destination) of each export run so far."""
+        self.staged: list[Staged] = []
+        """The files written aside so far (each export's, ``--out``'s), in order."""
         try:
             req = P.SessionLoad(assembly=start, name=name) if start is not None else P.SessionNew(name=name)
             self.session = self._call(req).session
@@ -86,9 +121,9 @@ class Runner:
 
     def run(self, op: Op, progress=None) -> dict:
         """Run ``op``; a JSON-able summary of what it did. Any error names the operation."""
+        if op.kind == "export":
+            return self._export(op, progress)
         try:
-            if op.kind == "export":
-                return self._export(op.args, progress)
             if op.kind == "undo" and self.depth == 0:
                 raise InputError("nothing to undo")
             r = self._call(self._request(op))
@@ -127,35 +162,38 @@ class Runner:
                 return p
         raise InputError(f"no placement {instance!r} in this session")
 
-    def _export(self, a: dict, progress) -> dict:
-        req = P.ExportMesh(session=self.session, format=a["format"], seed=a["seed"], lod=a["lod"],
-                           options=a["options"])
-        r = self._call(req, progress)
-        out: Path = a["out"]
-        tmp = out.with_name(f".{out.name}.{os.getpid()}-{len(self.staged)}.tmp")
+    def _export(self, op: Op, progress) -> dict:
+        a = op.args
         try:
-            with open(tmp, "wb") as f:
-                self.staged.append((tmp, out))
-                f.write(r.data.tobytes())
-        except OSError as exc:
-            raise InputError(f"out {out}: cannot write ({exc.strerror})") from None
+            r = self._call(P.ExportMesh(session=self.session, format=a["format"], seed=a["seed"],
+                                        lod=a["lod"], options=a["options"]), progress)
+        except ArboretumError as exc:
+            raise InputError(f"{op.where}: {exc}") from None
+        out: Path = a["out"]
+        self.stage(out, f"{op.where}: out", lambda tmp: tmp.write_bytes(r.data.tobytes()))
         return {"op": "export", "label": f"exported {out} ({len(r.data)} bytes)", "out": str(out), **r.stats}
 
+    def stage(self, out: Path, what: str, write: Callable[[Path], Any]) -> None:
+        """Write ``out``'s new file aside, ``write(temporary path)``, for ``commit``; ``what`` names it in
+        errors (``--out``, ``operation 3 (export): out``)."""
+        tmp = out.with_name(f".{out.name}.{os.getpid()}-{len(self.staged)}.tmp")
+        self.staged.append(Staged(tmp, out, what))
+        try:
+            write(tmp)
+        except OSError as exc:
+            raise InputError(f"{what} {out}: cannot write ({exc.strerror or exc})") from None
+
     def commit(self) -> None:
-        """Move every export's file into place (after the last operation succeeded), Ctrl-C held back
-        until the last one (``atomic.interruptible``; the caller may hold it over more, e.g. ``--out``)."""
-        with interruptible():
-            while self.staged:
-                tmp, out = self.staged[0]
-                os.replace(tmp, out)
-                self.staged.pop(0)
+        """Put every staged file in place, all or none (``swap``), after the last operation succeeded."""
+        staged, self.staged = self.staged, []
+        swap(staged)  # on a failure, it removes the temporary files itself
 
     def assembly(self) -> Assembly:
         return self._call(P.SessionGet(session=self.session)).assembly
 
     def close(self) -> None:
         """Remove the files of exports not committed; close the library."""
-        for tmp, _ in self.staged:
-            tmp.unlink(missing_ok=True)
+        for s in self.staged:
+            s.tmp.unlink(missing_ok=True)
         self.staged = []
         self.ctx.close()
