@@ -208,7 +208,8 @@ def client_keys(curve: str | os.PathLike, name: str | None = None) -> tuple[byte
     ``curve`` is a folder from ``arboretum keys generate`` (its ``NAME.key_secret`` when ``name`` is given,
     else ``client.key_secret``, else its only client secret) or the path of one ``*.key_secret``; either
     way ``server.key`` lies next to the secret. ``InputError`` naming the file for a missing, unreadable or
-    malformed key, and listing the secrets when several could be meant."""
+    malformed key, listing the secrets when several could be meant, and naming both files when the folder's
+    ``clients/NAME.key`` (the key the server accepts for that secret) is not the secret's public half."""
 
     path = Path(curve)
     if path.is_file():
@@ -227,7 +228,27 @@ def client_keys(curve: str | os.PathLike, name: str | None = None) -> tuple[byte
     server_pub, _ = load_key(folder / "server.key")
     pub, sec = load_key(secret, secret=True)
     assert sec is not None  # load_key(secret=True) checked it
+    _check_accepted(folder, secret, pub)
     return server_pub, pub, sec
+
+
+def _check_accepted(folder: Path, secret: Path, pub: bytes) -> None:
+    """``InputError`` naming both files when ``folder/clients/NAME.key`` exists for the secret
+    ``NAME.key_secret`` and is not its public half ``pub``: the server would refuse it, seen as a timeout."""
+    name = secret.name.removesuffix(".key_secret")
+    accepted = folder / "clients" / f"{name}.key"
+    if name == secret.name or not accepted.is_file() or load_key(accepted)[0] == pub:
+        return
+    raise InputError(f"{secret} and {accepted} are not one key pair (a 'keys generate --force' cut short?), so the "
+                     f"server would refuse this secret, seen as a timeout; run 'arboretum keys generate {folder} "
+                     f"--client {name} --force' and restart the server (or, if the server's clients/{name}.key is "
+                     "newer than this copy, copy it here)")
+
+
+def same_pair(secret: str | os.PathLike, public: str | os.PathLike) -> bool:
+    """Whether the public-key file ``public`` holds the public half of the secret-key file ``secret``;
+    ``InputError`` naming a file that cannot be read as its kind (see ``load_key``)."""
+    return load_key(public)[0] == load_key(secret, secret=True)[0]
 
 
 def _choose_client(folder: Path, name: str | None) -> str:

@@ -44,8 +44,9 @@ def curve_keys(folder: str):
 
     Every key file is read here, before anything starts: one that cannot be read (a stray README.key, a
     truncated key), a public key file holding a secret too (a leak), a ``server.key`` that is not the
-    public half of ``server.key_secret`` or an empty ``clients/`` is an ``InputError`` naming it, never a
-    server that silently refuses every client. Keys added later need a restart."""
+    public half of ``server.key_secret``, a client secret kept in ``folder`` that is not the pair of its
+    ``clients/NAME.key`` or an empty ``clients/`` is an ``InputError`` naming it, never a server that
+    silently refuses a client. Keys added later need a restart."""
     from pathlib import Path
 
     import zmq
@@ -61,6 +62,7 @@ def curve_keys(folder: str):
     pub, sec = load_key(secret, secret=True)
     check_server_public(root, pub)
     accepted = accepted_keys(root)
+    check_client_pairs(root)
     auth = ThreadAuthenticator(zmq.Context.instance())
     auth.start()
     auth.configure_curve_callback(domain="*", credentials_provider=_Accepted(accepted))
@@ -105,6 +107,35 @@ def accepted_keys(root) -> frozenset[bytes]:
             raise InputError(f"--curve {root}: {exc}; every clients/*.key must be a client's public key "
                              "(move other files out)") from None
     return frozenset(keys)
+
+
+def check_client_pairs(root) -> None:
+    """``InputError`` naming the files when a client secret kept in ``root`` (``NAME.key_secret``) is
+    unreadable or not the pair of ``root/clients/NAME.key`` (a ``keys generate --force`` killed between
+    its two renames): that client would be refused forever, seen as a timeout. Secrets not kept in
+    ``root`` (given away, deleted) and revoked clients (no ``clients/NAME.key``) cannot be checked: they
+    pass."""
+    from arboretum_library.errors import InputError
+    from arboretum_library.remote import same_pair
+
+    bad: list[str] = []
+    for secret in sorted(root.glob("*.key_secret")):
+        name = secret.name.removesuffix(".key_secret")
+        public = root / "clients" / f"{name}.key"
+        if name == "server" or name.startswith(".") or not public.is_file():
+            continue
+        try:
+            if not same_pair(secret, public):
+                bad.append(name)
+        except InputError as exc:
+            raise InputError(f"--curve {root}: {exc}, so it cannot be checked against {public}") from None
+    if bad:
+        files = "; ".join(f"{root / n}.key_secret is not the secret of {root / 'clients' / n}.key" for n in bad)
+        mend = (f"run 'arboretum keys generate {root} --client {bad[0]} --force'" if len(bad) == 1 else
+                f"run 'arboretum keys generate {root} --client NAME --force' for each of {', '.join(bad)}")
+        raise InputError(f"--curve {root}: {files} (a 'keys generate --force' cut short?), so "
+                         f"{'that client' if len(bad) == 1 else 'those clients'} would be refused, seen as a "
+                         f"timeout; {mend} and hand out the new secret")
 
 
 class _Accepted:

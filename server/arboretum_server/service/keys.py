@@ -5,17 +5,22 @@ on the server), ``DIR/NAME.key_secret`` (give it to the client NAME, default ``c
 ``DIR/clients/NAME.key`` (the public keys the server accepts: one file per client). A later run with a
 new ``--client`` adds that client's pair and keeps the server's, so every client given keys before
 stays accepted. ``--force`` replaces an existing client's pair (never the server's: a new server key
-needs a new folder). Runs on one folder at once take turns (a lock on the folder; a run that finds it
-taken says so on stderr and gives up after ``LOCK_TIMEOUT_S``), so two new clients added together share
-one server pair; each pair is written aside and renamed into place with Ctrl-C held back, so an
-interrupted run leaves the old pair or the new one, never half of each. ``arboretum serve --curve DIR``
-(which refuses a ``server.key`` not matching ``server.key_secret`` or holding a secret) and
-``Remote(..., curve=DIR)`` read them.
+needs a new folder) and mends a pair whose two files disagree, which a run without it reports. Runs on
+one folder at once take turns (a lock on the folder; a run that finds it taken says so on stderr and
+gives up after ``--wait`` seconds, default ``LOCK_TIMEOUT_S``), so two new clients added together share
+one server pair. A pair is written to ``.NAME.key_secret.new`` and ``clients/.NAME.key.new`` (synced to
+disk), then renamed into place, secret first, with Ctrl-C held back: a run killed (SIGKILL, power cut)
+after the secret's rename leaves the public half aside, and the next run on the folder renames it into
+place under the lock before anything else (a leftover from before the first rename is deleted, the old
+pair standing). ``arboretum serve --curve DIR`` (which refuses a ``server.key`` not matching
+``server.key_secret`` or holding a secret, and a ``NAME.key_secret`` in DIR not matching
+``clients/NAME.key``) and ``Remote(..., curve=DIR)`` read them.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -27,7 +32,11 @@ SERVER = "server"
 """Base name of the server's key files (``server.key``, ``server.key_secret``): no client may use it."""
 
 LOCK_TIMEOUT_S = 30.0
-"""How long a run waits for another run's lock on the key folder before giving up (an ``InputError``)."""
+"""How long a run waits for another run's lock on the key folder before giving up (an ``InputError``);
+the default of ``--wait``."""
+
+NEW = ".new"
+"""Suffix of the files a pair is written to before its renames (``.NAME.key_secret.new``, ``.NAME.key.new``)."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -38,7 +47,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     g.add_argument("--client", default="client",
                    help="name of the client key pair (default: client); a new name adds a client and keeps "
                         "the server key")
-    g.add_argument("--force", action="store_true", help="replace this client's existing key pair")
+    g.add_argument("--force", action="store_true",
+                   help="replace this client's existing key pair (also mends a pair whose files disagree)")
+    g.add_argument("--wait", type=float, default=None, metavar="SECONDS",
+                   help=f"how long to wait for another run on DIR to finish (default {LOCK_TIMEOUT_S:g}; "
+                        "0: do not wait; inf: as long as it takes)")
     add_json_flag(g)
     g.set_defaults(func=run)
 
@@ -53,15 +66,27 @@ def check_client(client: str) -> None:
         raise InputError(f"--client {client!r}: '{SERVER}' names the server's own key files; choose another name")
 
 
+def check_wait(seconds: float) -> None:
+    """InputError for a lock wait that is negative or not a number (``inf`` waits as long as it takes)."""
+    from arboretum_library.errors import InputError
+
+    if math.isnan(seconds) or seconds < 0:
+        raise InputError(f"--wait {seconds:g}: give the seconds to wait for another run, 0 or more "
+                         "(0: do not wait)")
+
+
 def generate(folder: str | os.PathLike, client: str = "client", force: bool = False, *,
              timeout: float = LOCK_TIMEOUT_S, on_wait: Callable[[str], None] | None = None) -> dict[str, str]:
-    """Create the client's key files in ``folder`` (and the server's when missing); returns their paths
-    and ``server_key`` ('created' or 'kept'). ``InputError`` if the client's keys exist (unless ``force``),
-    or when another run holds the folder's lock for ``timeout`` seconds (``on_wait`` is told once when the
-    wait begins). Secret files are mode 0600 from their creation on, public ones 0644."""
+    """Create the client's key files in ``folder`` (and the server's when missing); returns their paths,
+    ``server_key`` ('created' or 'kept') and, when a killed run's pair was finished first, ``recovered``
+    (the public key files renamed into place). ``InputError`` if the client's keys exist (unless
+    ``force``; a pair whose two files disagree is named as such), or when another run holds the folder's
+    lock for ``timeout`` seconds (0: not waiting; ``on_wait`` is told once when the wait begins). Secret
+    files are mode 0600 from their creation on, public ones 0644."""
     from arboretum_library.errors import InputError
 
     check_client(client)
+    check_wait(timeout)
     root = Path(folder)
     if root.exists() and not root.is_dir():
         raise InputError(f"DIR {root}: is a file, not a folder")
@@ -69,18 +94,41 @@ def generate(folder: str | os.PathLike, client: str = "client", force: bool = Fa
     client_sec, accepted = root / f"{client}.key_secret", root / "clients" / f"{client}.key"
     (root / "clients").mkdir(parents=True, exist_ok=True)
     with _locked(root, timeout, on_wait):  # another run on this folder waits: one server pair, never two
+        recovered = _recover(root)
         if server_pub.exists() != server_sec.exists():
             raise InputError(f"{root} holds only one of {server_pub.name} and {server_sec.name}; "
                              "restore the other or use a new folder")
-        if not force and (client_sec.exists() or accepted.exists()):
-            raise InputError(f"{root} already holds keys for the client {client!r} "
-                             "(use --force to replace them, or --client NAME to add another client)")
+        finished = str(accepted) in recovered  # a killed run's new pair for this client, now whole: keep it
+        if not force and not finished:
+            _check_absent(root, client, client_sec, accepted)
         kept = server_sec.exists()
         if not kept:
             _write_pair(server_sec, server_pub)
-        _write_pair(client_sec, accepted)
-    return {"server_public": str(server_pub), "server_secret": str(server_sec), "server_key": "kept" if kept else "created",
-            "client_secret": str(client_sec), "client_public": str(accepted)}
+        if force or not finished:
+            _write_pair(client_sec, accepted)
+    paths = {"server_public": str(server_pub), "server_secret": str(server_sec),
+             "server_key": "kept" if kept else "created", "client_secret": str(client_sec),
+             "client_public": str(accepted)}
+    return paths | ({"recovered": ", ".join(recovered)} if recovered else {})
+
+
+def _check_absent(root: Path, client: str, secret: Path, public: Path) -> None:
+    """``InputError`` when ``client`` has key files in ``root`` already: naming both files when they are
+    not one pair (a killed ``--force``, a file copied from elsewhere), so that ``--force`` mends it."""
+    from arboretum_library.errors import InputError
+    from arboretum_library.remote import same_pair
+
+    if secret.exists() and public.exists():
+        try:
+            mismatch = not same_pair(secret, public)
+        except InputError as exc:
+            raise InputError(f"{exc}; rerun with --force to replace the client {client!r}'s pair") from None
+        if mismatch:
+            raise InputError(f"{secret} and {public} are not one key pair (a 'keys generate --force' cut short?), "
+                             f"so the server refuses the client {client!r}; rerun with --force to replace both")
+    if secret.exists() or public.exists():
+        raise InputError(f"{root} already holds keys for the client {client!r} "
+                         "(use --force to replace them, or --client NAME to add another client)")
 
 
 SECRET_MODE, PUBLIC_MODE = 0o600, 0o644
@@ -91,23 +139,27 @@ SECRET_MODE, PUBLIC_MODE = 0o600, 0o644
 def _locked(root: Path, timeout: float, on_wait: Callable[[str], None] | None) -> Iterator[None]:
     """Hold an exclusive ``flock`` on the folder ``root`` itself (no lock file is left behind): runs of
     ``generate`` on one folder, in threads or processes, check and write their keys one at a time. Waits
-    at most ``timeout`` seconds for another run; ``InputError`` naming the folder when that is over or
-    when the folder cannot be locked at all (some network filesystems refuse ``flock`` on a folder)."""
+    at most ``timeout`` seconds for another run (``inf``: no limit); ``InputError`` naming the folder when
+    that is over or when the folder cannot be locked at all (some network filesystems refuse ``flock`` on
+    a folder)."""
     from arboretum_library.errors import InputError
     from arboretum_library.recovery import wait_for_lock
 
     waiting = f"waiting for another 'arboretum keys generate' on {root} ... (Ctrl-C to stop)"
-    tell = (lambda: on_wait(waiting)) if on_wait is not None else None
+    tell = (lambda: on_wait(waiting)) if on_wait is not None and timeout > 0 else None
     try:
         fd = os.open(root, os.O_RDONLY)
     except OSError as exc:
         raise InputError(f"DIR {root}: cannot be opened to lock it ({exc.strerror or exc})") from None
     try:
         try:
-            got = wait_for_lock(fd, timeout, tell)
+            got = wait_for_lock(fd, None if math.isinf(timeout) else timeout, tell)
         except OSError as exc:  # EBADF, ENOLCK, ... from filesystems without flock on folders
             raise InputError(f"DIR {root}: cannot be locked ({exc.strerror or exc}), so runs on it could not take "
                              "turns; use a folder on a local filesystem") from None
+        if not got and timeout == 0:
+            raise InputError(f"DIR {root}: another 'arboretum keys generate' is using it (--wait 0: not waiting); "
+                             "try again when it is done")
         if not got:
             raise InputError(f"DIR {root}: another 'arboretum keys generate' held it for {timeout:g} s; "
                              "try again when it is done")
@@ -116,50 +168,94 @@ def _locked(root: Path, timeout: float, on_wait: Callable[[str], None] | None) -
         os.close(fd)  # releases the lock
 
 
+def _recover(root: Path) -> list[str]:
+    """Finish or undo the pair replacements a killed run left in ``root`` (call with its lock held): a
+    leftover public half whose key is that of the secret in place is renamed into place (the kill came
+    between the two renames); any other leftover (the kill came before them) is deleted, the old pair
+    standing. Returns the public key files renamed into place."""
+    from arboretum_library.codec import fsync_dir
+
+    names = {p.name[1:-len(".key_secret" + NEW)] for p in root.glob(f".*.key_secret{NEW}")}
+    names |= {p.name[1:-len(".key" + NEW)] for p in (root / "clients").glob(f".*.key{NEW}")}
+    pairs = [(root / f"{SERVER}.key_secret", root / f"{SERVER}.key")]
+    pairs += [(root / f"{n}.key_secret", root / "clients" / f"{n}.key") for n in sorted(names - {SERVER})]
+    done = []
+    for secret, public in pairs:
+        if _rolls_forward(secret, _temp(public)):
+            os.replace(_temp(public), public)
+            fsync_dir(public.parent)
+            done.append(str(public))
+        _temp(secret).unlink(missing_ok=True)
+        _temp(public).unlink(missing_ok=True)
+    return done
+
+
+def _rolls_forward(secret: Path, public_temp: Path) -> bool:
+    """Whether ``public_temp`` holds the public key of ``secret`` (neither missing nor unreadable)."""
+    from arboretum_library.errors import InputError
+    from arboretum_library.remote import same_pair
+
+    if not (secret.is_file() and public_temp.is_file()):
+        return False
+    try:
+        return same_pair(secret, public_temp)
+    except InputError:  # cut short while it was written: the renames had not begun
+        return False
+
+
+def _temp(path: Path) -> Path:
+    """Where ``path`` is written before its rename: ``.NAME.new`` beside it (one name, so that the next run
+    finds it)."""
+    return path.with_name(f".{path.name}{NEW}")
+
+
 def _write_pair(secret: Path, public: Path) -> None:
     """A new CurveZMQ key pair as the certificate files ``secret`` and ``public`` (the format
-    ``zmq.auth.load_certificate`` reads): both written to temporary files first, then renamed, secret
-    first, with Ctrl-C held back until the public one is in place, so an interrupted run leaves the old
-    pair or the new one (an existing pair is replaced only with ``--force``)."""
+    ``zmq.auth.load_certificate`` reads). Both are written beside their places and synced (the public
+    half first: it is whole before the secret exists), then renamed, secret first, the folder synced
+    between, with Ctrl-C held back until the public one is in place: an interrupted run leaves the old
+    pair or the new one, a killed one the new secret and its public half for ``_recover``."""
     import zmq
 
     from arboretum_library.atomic import interruptible
+    from arboretum_library.codec import fsync_dir
 
     pub, sec = (k.decode("ascii") for k in zmq.curve_keypair())
-    temps: list[Path] = []
+    renaming = False
     try:
-        temps.append(_write_temp(secret, "Secret", f'    public-key = "{pub}"\n    secret-key = "{sec}"\n',
-                                 SECRET_MODE))
-        temps.append(_write_temp(public, "Public", f'    public-key = "{pub}"\n', PUBLIC_MODE))
+        _write_temp(_temp(public), "Public", f'    public-key = "{pub}"\n', PUBLIC_MODE)
+        _write_temp(_temp(secret), "Secret", f'    public-key = "{pub}"\n    secret-key = "{sec}"\n', SECRET_MODE)
+        fsync_dir(public.parent)  # the public half's name too is on disk before the secret's rename
         with interruptible():
-            os.replace(temps[0], secret)
-            os.replace(temps[1], public)
-    finally:
-        for tmp in temps:
-            tmp.unlink(missing_ok=True)
+            renaming = True
+            os.replace(_temp(secret), secret)
+            fsync_dir(secret.parent)  # on disk before the public half's rename can be
+            os.replace(_temp(public), public)
+            fsync_dir(public.parent)
+    except BaseException:
+        if not renaming or _temp(secret).exists():  # the old pair stands; else leave the public half to recover
+            _temp(secret).unlink(missing_ok=True)
+            _temp(public).unlink(missing_ok=True)
+        raise
 
 
-def _write_temp(path: Path, kind: str, keys: str, mode: int) -> Path:
-    """A certificate in a new temporary file beside ``path``, opened with ``mode`` (so a secret is never
-    readable by others, whatever the umask); its path. Nothing is left when writing fails."""
-    import secrets
-
+def _write_temp(path: Path, kind: str, keys: str, mode: int) -> None:
+    """A certificate in the new file ``path`` (any older one there is replaced), opened with ``mode`` (so
+    a secret is never readable by others, whatever the umask) and synced to disk."""
     text = (f"#   ZeroMQ CURVE {kind} Certificate, written by 'arboretum keys generate'\n"
             + ("#   Keep it private: it lets its holder in.\n" if kind == "Secret" else "")
             + f"\nmetadata\ncurve\n{keys}")
-    tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, mode)
-    try:
-        with os.fdopen(fd, "w", encoding="ascii") as fh:
-            os.fchmod(fh.fileno(), mode)  # exact: the umask can only have narrowed it
-            fh.write(text)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return tmp
+    path.unlink(missing_ok=True)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, mode)
+    with os.fdopen(fd, "w", encoding="ascii") as fh:
+        os.fchmod(fh.fileno(), mode)  # exact: the umask can only have narrowed it
+        fh.write(text)
+        fh.flush()
+        os.fsync(fh.fileno())
 
 
 def run(args: argparse.Namespace) -> int:
-    paths = generate(args.dir, args.client, args.force, timeout=LOCK_TIMEOUT_S, on_wait=tell)
+    wait = LOCK_TIMEOUT_S if args.wait is None else args.wait
+    paths = generate(args.dir, args.client, args.force, timeout=wait, on_wait=tell)
     emit(args, paths, "\n".join(f"{k}: {v}" for k, v in paths.items()))
     return 0
