@@ -250,12 +250,12 @@ class FakeSession:
         self._draft = self._draft_redo.pop()
         return self._refine_state()
 
-    def refine_commit(self) -> list[str]:
+    def refine_commit(self) -> tuple[list[str], tuple[str, ...]]:
         hbl = self._need_draft()
         ex = Example(f"refined-{len(self.library) + 1:04d}", as_example_structure(hbl),
                      Provenance("refined", "0" * 64), describe(as_example_structure(hbl)))
         self.library[ex.id] = dataclasses.replace(ex, tags=tags_for(ex.descriptors))
-        return [ex.id]
+        return [ex.id], ()
 
     def close(self) -> None:
         self.calls.append("close")

@@ -104,8 +104,9 @@ class SessionPort(Protocol):
 
     def refine_redo(self) -> RefineState: ...
 
-    def refine_commit(self) -> list[str]:
-        """Store the refined draft's examples in the library; their ids."""
+    def refine_commit(self) -> tuple[list[str], tuple[str, ...]]:
+        """Store the refined draft's examples in the library; their ids and the server's notes (a repeated
+        commit of an unchanged draft stores nothing and answers the first ids, with a note)."""
         ...
 
     def close(self) -> None: ...

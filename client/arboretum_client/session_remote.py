@@ -110,8 +110,9 @@ class RemoteSession:
     def refine_redo(self) -> P.RefineState:
         return self.remote.call(P.RefineRedo(session=self.session))
 
-    def refine_commit(self) -> list[str]:
-        return list(self.remote.call(P.RefineCommit(session=self.session)).ids)
+    def refine_commit(self) -> tuple[list[str], tuple[str, ...]]:
+        r = self.remote.call(P.RefineCommit(session=self.session))
+        return list(r.ids), tuple(r.notes)
 
     def close(self) -> None:
         self.remote.close()

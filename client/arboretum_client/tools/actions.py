@@ -30,6 +30,14 @@ def describe_error(exc: BaseException) -> str:
     return str(exc) or type(exc).__name__
 
 
+def committed(ids: list[str], notes: tuple[str, ...]) -> str:
+    """The status line after ``refine_commit``: the ids stored and the server's notes (a repeated commit
+    of an unchanged draft stored nothing: its note says so instead of 'stored')."""
+    repeat = [n for n in notes if "committed already" in n]
+    head = repeat[0] if repeat else f"stored {', '.join(ids)}"
+    return "; ".join([head, *(n for n in notes if n not in repeat)])
+
+
 class Actions:
     """Named operations over the session, wired to a ``ClientState``."""
 
@@ -243,4 +251,4 @@ class Actions:
 
     def commit_refinement(self) -> None:
         self._submit("commit", lambda p, _: p.refine_commit(),
-                     lambda ids: (self.state.say(f"stored {', '.join(ids)}"), self.refresh_library()))
+                     lambda r: (self.state.say(committed(*r)), self.refresh_library()))

@@ -43,6 +43,9 @@ class RefineDraft:
     revision: int = 0
     generation: str = ""
     """Token of the saved source this draft journals its edits under (``refine_store``)."""
+    committed: tuple[Any, tuple[str, ...]] | None = None
+    """(the state last committed, the ids it was stored under): a second commit of that same state
+    (a double press) answers those ids instead of storing copies (in memory: not after a restart)."""
 
     @property
     def current(self) -> Any:

@@ -153,12 +153,28 @@ def commit(ctx: Context, req: P.RefineCommit):
         dec = d.current
         said = tuple(option_notes(dec.options) + scan_notes(dec.stats))  # the user chose the lobe count
         lib = ctx.library()
+        stats = {"lobes": len(dec.lobes)}
+        if d.committed is not None and d.committed[0] is dec and set(d.committed[1]) <= set(lib.ids()):
+            ids = d.committed[1]
+            return P.LibraryImported(ids=ids, stats=stats, notes=said + (
+                f"this draft was committed already, unchanged since, as {_span(ids)}: not stored again",))
         prov = Provenance(d.name, "", dec.options.species, dec.options.as_dict())
         stem = "".join(c if c.isalnum() or c in "-_" else "-" for c in d.name)[:60] or "scan"
-        examples = lib.add_new(make_examples(dec.hbl, prov), stem)  # ids picked under the lock
-        return P.LibraryImported(ids=tuple(e.id for e in examples), stats={"lobes": len(dec.lobes)}, notes=said)
+        made = make_examples(dec.hbl, prov)
+        bare = sum(not e.structure.lobes for e in made)
+        examples = lib.add_new(made, stem)  # ids picked under the lock
+        d.committed = (dec, tuple(e.id for e in examples))
+        if bare:
+            said += (f"{bare} of {len(made)} examples have no lobes: "
+                     "they grow no twigs or leaves",)
+        return P.LibraryImported(ids=d.committed[1], stats=stats, notes=said)
 
     return _with_draft(ctx, req.session, then)
+
+
+def _span(ids: tuple[str, ...]) -> str:
+    """``ids`` as 'a..b (N examples)', or the one id."""
+    return ids[0] if len(ids) == 1 else f"{ids[0]}..{ids[-1]} ({len(ids)} examples)"
 
 
 HANDLERS = {
