@@ -411,6 +411,7 @@ def test_refinement_rejects_bad_requests(leaf_on):
         (lambda: refine.split_lobe(d, 0, [stroke, np.full((2, 3), np.nan)]), "stroke 1"),
         (lambda: refine.split_lobe(d, 0, [stroke, np.zeros((0, 3))]), "stroke 1"),
         (lambda: refine.split_lobe(d, 0, [stroke[:, :2], stroke[:, :2]]), "stroke 0"),
+        (lambda: refine.split_lobe(d, 0, [stroke * 1e300, stroke * -1e300]), "stroke 0 reaches"),  # overflowed
         (lambda: refine.split_lobe(d, 0, [stroke, stroke + 0.01], seed=-1), "seed"),
         (lambda: refine.split_lobe(d, 0, [stroke, stroke + 0.01], seed=2.5), "seed"),
     ]

@@ -62,7 +62,10 @@ def _point_indices(d: Decomposition, indices) -> np.ndarray:
 
 
 def _strokes(strokes) -> list[np.ndarray]:
-    """Each stroke as (S >= 1, 3) finite float64; InputError otherwise."""
+    """Each stroke as (S >= 1, 3) finite float64 within ``MAX_COORDINATE`` (as scans are: squared
+    distances of 1e300 overflow in k-means); InputError otherwise."""
+    from arboretum_library.pointio import MAX_COORDINATE
+
     out = []
     for k, s in enumerate(strokes if isinstance(strokes, (list, tuple, np.ndarray)) else [None]):
         try:
@@ -71,6 +74,9 @@ def _strokes(strokes) -> list[np.ndarray]:
             a = np.zeros((0, 0))
         if a.ndim != 2 or a.shape[1] != 3 or len(a) == 0 or not np.isfinite(a).all():
             raise InputError(f"split lobe: stroke {k} must be 1 or more finite 3D points (S, 3)")
+        if np.abs(a).max() > MAX_COORDINATE:
+            raise InputError(f"split lobe: stroke {k} reaches {np.abs(a).max():.3g} m; coordinates beyond "
+                             f"{MAX_COORDINATE:.0e} m are refused")
         out.append(a)
     return out
 
