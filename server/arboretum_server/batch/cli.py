@@ -58,6 +58,10 @@ def check_args(args: argparse.Namespace) -> str:
         raise InputError(f"--points must not be negative (0: all), got {args.points}")
     if not (math.isfinite(args.height) and args.height > 0):
         raise InputError(f"--height must be a finite number > 0, got {args.height}")
+    from arboretum_library.pointio import MAX_COORDINATE
+
+    if args.height > MAX_COORDINATE:  # DecomposeOptions' limit, named by the flag (not once per scan)
+        raise InputError(f"--height must be at most {MAX_COORDINATE:g} (metres), got {args.height:g}")
     check_seed(args.seed)
     check_points(DecomposeOptions(points=args.points), "--points")
     folder = args.report or f"{str(Path(args.library)).rstrip('/')}-report"

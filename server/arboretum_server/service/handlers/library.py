@@ -41,21 +41,28 @@ def delete(ctx: Context, req: P.LibraryDelete) -> P.Ack:
 
 
 def options_from(species: str, options: dict) -> Any:
-    """``DecomposeOptions`` from a request's species and option map; ``InputError`` for unknown names."""
+    """``DecomposeOptions`` from a request's species and option map; one ``InputError`` naming the option
+    for an unknown name or a bad value (``DecomposeOptions`` checks every value), or for ``points``
+    below ``min_points``. A whole number sent as a float (2.0) counts as that int."""
     from arboretum_library.errors import InputError
-    from arboretum_server.decompose.options import DecomposeOptions
+    from arboretum_server.decompose.options import WHOLE_LIMITS, DecomposeOptions
+    from arboretum_server.decompose.preprocess import check_points
 
     known = {f.name for f in dataclasses.fields(DecomposeOptions)}
     bad = sorted(set(options) - known)
     if bad:
         raise InputError(f"unknown decomposition option(s): {', '.join(bad)}")
-    opts = dict(options)
-    if "sc_bins" in opts:
-        opts["sc_bins"] = tuple(opts["sc_bins"])
-    try:
-        return DecomposeOptions(**{"species": species.lower(), **opts})
-    except TypeError as exc:
-        raise InputError(f"decomposition options: {exc}") from None
+    opts = {k: _int_if_whole(v) if k in WHOLE_LIMITS else v for k, v in options.items()}
+    if isinstance(opts.get("sc_bins"), list | tuple):
+        opts["sc_bins"] = tuple(_int_if_whole(b) for b in opts["sc_bins"])
+    o = DecomposeOptions(**{"species": species.lower(), **opts})
+    check_points(o)  # now, not in the worker
+    return o
+
+
+def _int_if_whole(v: Any) -> Any:
+    """``v`` as an int when it is a finite float with no fraction (2.0), else ``v`` as it is."""
+    return int(v) if isinstance(v, float) and v.is_integer() else v
 
 
 def import_job(progress, library_path: str, points: np.ndarray, labels: np.ndarray | None, name: str,
