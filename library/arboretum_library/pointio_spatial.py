@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .repeats import distinct_rows
+
 
 def guess_up_axis(points: np.ndarray) -> tuple[str, float]:
     """Guess whether a tree stands along +Z or +Y; returns ('z' | 'y', confidence in [0.5, 1)).
@@ -20,6 +22,7 @@ def guess_up_axis(points: np.ndarray) -> tuple[str, float]:
     score difference. See docs/scan-input.md for limits.
     """
     pts = np.asarray(points, dtype=np.float64)
+    pts = pts[distinct_rows(pts)[0]]  # a pile of copies (no-return rows at one spot) is one point
     if len(pts) > 50_000:
         pts = pts[np.random.default_rng(0).choice(len(pts), 50_000, replace=False)]
     s_z, s_y = _upright_score(pts, 2), _upright_score(pts, 1)

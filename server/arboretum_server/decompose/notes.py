@@ -14,6 +14,9 @@ ALL_LEAF = 0.95
 """A cloud with at least this fraction of foliage points gets a note: its branches have no wood to follow
 (the bundled real scans measure 2-37 % foliage, the synthetic test trees 1-70 %, a tall Gaussian blob
 99.8 %)."""
+REPEATED = 0.01
+"""A cloud of which at least this fraction of the rows repeat an earlier row exactly gets a note (merged
+scans repeat points; scanners write rows without a return as (0, 0, 0)): the repeats were merged."""
 
 
 def notes(options: DecomposeOptions, stats: dict) -> list[str]:
@@ -40,9 +43,9 @@ def result_notes(options: DecomposeOptions, stats: dict) -> list[str]:
 
 
 def scan_notes(stats: dict) -> list[str]:
-    """Notes on the cloud itself (all foliage, a straight line, trunk-like columns away from the root),
-    which refinement does not change. A figure missing from ``stats`` gives no note."""
-    out = []
+    """Notes on the cloud itself (repeated points, all foliage, a straight line, trunk-like columns away
+    from the root), which refinement does not change. A figure missing from ``stats`` gives no note."""
+    out = [n for n in [repeated_note(stats.get("repeated"))] if n]
     leaf = stats.get("leaf_points", 0) / max(stats.get("points", 0), 1)
     if leaf >= ALL_LEAF:
         out.append(f"{leaf:.1%} of the points are foliage ({stats['labels']} labels) and almost none wood: the "
@@ -58,6 +61,25 @@ def scan_notes(stats: dict) -> list[str]:
                    f"({where}{'; ...' if len(cols) > 3 else ''}; scan units, Z up): another tree? It was "
                    "decomposed as part of this one; crop the scan to one tree if it is not")
     return out
+
+
+def repeated_note(rep: dict | None) -> str | None:
+    """The note on the exact duplicates merged (``repeats.Repeats.as_stats``) when they make up
+    ``REPEATED`` of the rows or more or their pile was left out, naming the spot when one point holds
+    most of them."""
+    if not rep or not (rep["merged"] >= REPEATED * max(rep["rows"], 1) or rep.get("left_out")):
+        return None
+    if rep["most"] - 1 >= rep["merged"] / 2 or rep.get("left_out"):
+        what = f"{rep['most']:,} rows hold the point ({', '.join(f'{v:.7g}' for v in rep['at'])}), scan units"
+        if not any(rep["at"]):
+            what += " (no-return rows of the scanner?)"
+        if rep.get("left_out"):
+            what += f"; it lies {rep['apart']:.3g} from every other point and was left out"
+    elif rep["fewest"] == rep["most"]:
+        what = f"{rep['repeated']:,} points are given {rep['most']} times each"
+    else:
+        what = f"{rep['repeated']:,} points are given {rep['fewest']} to {rep['most']:,} times"
+    return f"{rep['merged']:,} repeated points merged, each point is used once: {what}"
 
 
 def option_notes(options: DecomposeOptions) -> list[str]:

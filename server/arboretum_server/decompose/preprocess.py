@@ -1,8 +1,10 @@
-"""Preprocessing (VRTree Appendix A): validate, remove the ground, downsample, find the trunk base, scale.
+"""Preprocessing (VRTree Appendix A): validate, merge repeated points, remove the ground, downsample, find
+the trunk base, scale.
 
-The paper downsamples every tree to 12,000 points and scales it to 0.8 m. We also find the root (the
-trunk base: ``trunkbase.find_root``), remove a ground disc when one is present, and refuse clouds that
-hold no single tree.
+The paper downsamples every tree to 12,000 points and scales it to 0.8 m. We also merge exact duplicates
+first (``distinct_rows``: merged scans repeat points, scanners write no-return rows as (0, 0, 0)), find
+the root (the trunk base: ``trunkbase.find_root``), remove a ground disc when one is present, and refuse
+clouds that hold no single tree.
 Normalised frame: ``p_work = (p_scan - root) * scale`` with the root at the origin and height 0.8 m.
 """
 
@@ -14,6 +16,7 @@ import numpy as np
 
 from arboretum_library.errors import InputError
 from arboretum_library.pointio import MAX_COORDINATE
+from arboretum_library.repeats import Repeats, distinct_rows
 
 from .columns import Column, trunk_columns
 from .options import WORK_HEIGHT, DecomposeOptions
@@ -32,6 +35,10 @@ GROUND_WIDER = 3.0
 GROUND_BELOW = 0.01
 """At most this fraction of the points lies below the ground (a plane through the underside of a crown
 has the trunk below it)."""
+PILE_APART = 0.25
+"""The most repeated point is left out when every other point lies farther from it than this fraction of
+their height: a scanner's no-return rows (0, 0, 0), far from a tree in a georeferenced frame, would
+otherwise set the trunk base or the height as a lone point (below the tree: the root moves onto it)."""
 @dataclass(frozen=True, eq=False)
 class Prepared:
     """A cloud ready for decomposition, in the normalised frame."""
@@ -39,9 +46,9 @@ class Prepared:
     points: np.ndarray
     """(N, 3) float64: points in the normalised frame (root at the origin, height 0.8)."""
     source_index: np.ndarray
-    """(N,) int64: index of each point in the input array."""
+    """(N,) int64: index of each point in the input array (of its first row when it was repeated)."""
     labels: np.ndarray | None
-    """(N,) uint8 WOOD/LEAF labels given with the input, or None."""
+    """(N,) uint8 WOOD/LEAF labels given with the input (a repeated point keeps its first row's), or None."""
     root_scan: np.ndarray
     """(3,) float64: the trunk base in the scan's frame."""
     scale: float
@@ -51,6 +58,8 @@ class Prepared:
     columns: tuple[Column, ...] = ()
     """Trunk-like columns away from the root, in the scan's frame and units (``columns.trunk_columns``):
     another tree standing higher?"""
+    repeats: Repeats = Repeats(0, 0, 0, 1, 1, None)
+    """Exact duplicates merged before anything else (``distinct_rows``)."""
 
 
 def validate(points: np.ndarray, options: DecomposeOptions) -> np.ndarray:
@@ -164,7 +173,7 @@ def prepare(
     """Validate, remove ground, downsample to ``options.points`` and normalise. InputError on bad input."""
     check_points(options)
     pts = validate(points, options)
-    keep = np.isfinite(pts).all(axis=1)
+    keep, repeats = _usable(pts, options)
     ground, plane = find_ground(pts[keep], options.ground_band)
     idx = np.flatnonzero(keep)[~ground]
     if len(idx) < options.min_points:
@@ -184,7 +193,37 @@ def prepare(
         if lab.shape[0] != len(pts):
             raise InputError(f"labels: {lab.shape[0]} labels for {len(pts)} points")
         lab = (lab[idx] > 0).astype(np.uint8)
-    return Prepared((sub - root) * scale, idx, lab, root, scale, int(ground.sum()), tuple(cols))
+    return Prepared((sub - root) * scale, idx, lab, root, scale, int(ground.sum()), tuple(cols), repeats)
+
+
+def _usable(pts: np.ndarray, options: DecomposeOptions) -> tuple[np.ndarray, Repeats]:
+    """(N,) bool: the finite rows of ``pts`` (N, 3) that are no copy of an earlier row, and the
+    ``Repeats`` (a label given with the input follows the first copy). InputError when too few remain."""
+    keep = np.isfinite(pts).all(axis=1)
+    first, repeats = distinct_rows(pts if keep.all() else pts[keep])
+    if not repeats.merged:
+        return keep, repeats
+    keep[np.flatnonzero(keep)[~first]] = False
+    repeats = far_pile(pts, keep, repeats)
+    n = int(keep.sum())
+    if n < options.min_points:
+        raise InputError(f"point cloud: {n:,} distinct points ({repeats.merged:,} repeated rows merged), need at "
+                         f"least {options.min_points} to decompose a tree")
+    return keep, repeats
+
+
+def far_pile(pts: np.ndarray, keep: np.ndarray, repeats: Repeats) -> Repeats:
+    """``repeats`` with the distance from its most repeated point to the nearest other kept point of
+    ``pts`` (N, 3); the point is cleared from ``keep`` (N,) bool, in place, when that distance exceeds
+    ``PILE_APART`` of the other points' height."""
+    pile = keep & (pts == np.asarray(repeats.at)).all(axis=1)
+    others = pts[keep & ~pile]
+    if not len(others):
+        return repeats
+    apart = float(np.sqrt(((others - np.asarray(repeats.at)) ** 2).sum(axis=1).min()))
+    out = apart > PILE_APART * float(np.ptp(others[:, 2]))
+    keep[pile] = not out
+    return repeats._replace(apart=apart, left_out=bool(out))
 
 
 def check_points(options: DecomposeOptions, name: str = "points") -> None:

@@ -67,7 +67,7 @@ class Decomposition:
     root_scan: np.ndarray
     """(3,) float64: the root in the scan frame."""
     source_index: np.ndarray
-    """(N,) int64: index of each point in the input array."""
+    """(N,) int64: index of each point in the input array (of its first row when it was repeated)."""
     adjacency: csr_matrix | None = None
     """(N, N) the bridged kNN graph with Euclidean weights."""
     timing: dict[str, float] = field(default_factory=dict)
