@@ -472,16 +472,18 @@ def test_cli_stores_examples_and_saves_hbl(truth, tmp_path, capsys):
     assert len(err) == 1 and "--save-hbl /proc/arboretum-hbl.npz: cannot write it" in err[0]
     with Library.open(lib) as library:  # nothing stored by the refused runs
         assert sorted(library.ids()) == sorted(data["stored"])
-    real_add, calls = Library.add, []
+    import arboretum_library.store as store
 
-    def interrupted_add(self, example, **kw):  # Ctrl-C while the third example is written
-        calls.append(example.id)
+    real_write, calls = store.write_folder, []
+
+    def interrupted_write(folder, *args, **kw):  # Ctrl-C while the third example is written
+        calls.append(folder)
         if len(calls) == 3:
             raise KeyboardInterrupt
-        return real_add(self, example, **kw)
+        return real_write(folder, *args, **kw)
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(Library, "add", interrupted_add)
+        mp.setattr(store, "write_folder", interrupted_write)
         assert main(["decompose", str(scan), "--main", "4", "--lobes", "10", "--up", "z", "--library", str(lib)]) == 130
     with Library.open(lib) as library:  # the two examples written before it are taken back
         assert len(calls) == 3 and sorted(library.ids()) == sorted(data["stored"])

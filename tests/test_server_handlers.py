@@ -240,6 +240,7 @@ def test_an_imported_scan_brings_its_notes_over_the_wire(tmp_path):
 
     rng = np.random.default_rng(0)
     pole = np.c_[rng.normal(0, 0.01, (3000, 2)), rng.uniform(0, 5, 3000)]
+    Library.open(tmp_path / "lib", create=True).close()  # import_scan makes it (ctx.library()) before the job
     result = import_job(lambda *a: None, str(tmp_path / "lib"), pole, None, "pole", "unknown", {"points": 2000})
     assert len(result["ids"]) >= 1 and [n for n in result["notes"] if "nearly a straight line" in n]
     reply = P.LibraryImported(ids=tuple(result["ids"]), notes=tuple(result["notes"]), stats=_jsonable(result["stats"]))

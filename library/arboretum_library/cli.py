@@ -12,6 +12,7 @@ command's own clean-up has run.
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import math
 import sys
@@ -117,11 +118,17 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # output piped into e.g. `head`, which closed early: not an error
         sys.stderr.close()
         return 0
-    except OSError as exc:  # a path the user named that cannot be read or written
-        if exc.filename is None:
+    except OSError as exc:  # a path the user named that cannot be read or written, or a full disk
+        if exc.filename is None and exc.errno not in _DISK_ERRNOS:
             raise
-        print(f"arboretum {args.command}: error: {exc.filename}: {exc.strerror or exc}", file=sys.stderr)
+        where = f"{exc.filename}: " if exc.filename is not None else ""
+        print(f"arboretum {args.command}: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2
+
+
+_DISK_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EIO}
+"""OSErrors of the disk, never of the code: a write() or close() on a full disk names no file, yet
+deserves one line rather than a traceback."""
 
 
 if __name__ == "__main__":

@@ -7,12 +7,16 @@ format marker, schema, SHA-256 of the arrays, the record's own validation) and n
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
+import errno
 import hashlib
 import json
 import os
 import re
+import sqlite3
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -146,12 +150,13 @@ def read_folder(folder: Path) -> Folder:
 
 
 def check_marker(root: Path, create: bool) -> None:
-    """Check ``root/library.json`` (or create the library when ``create``); ``InputError`` otherwise."""
+    """Check ``root/library.json`` (or create the library when ``create``); ``InputError`` otherwise,
+    ``DiskError`` when the library cannot be created (a full disk: nothing is left behind)."""
     marker = root / "library.json"
     if root.exists() and not root.is_dir():
         raise InputError(f"{root} is a file, not an Arboretum library folder")
     if not marker.exists():
-        if root.is_dir() and any(root.iterdir()) and create:
+        if root.is_dir() and any(p for p in root.iterdir() if not _MARKER_TEMP.fullmatch(p.name)) and create:
             raise InputError(f"{root} is not an Arboretum library (no library.json) and is not empty")
         if not create:
             what = "is not an Arboretum library (no library.json)" if root.exists() else "does not exist"
@@ -159,10 +164,7 @@ def check_marker(root: Path, create: bool) -> None:
         if (outer := enclosing_library(root)) is not None:
             raise InputError(f"library {root}: lies inside the library {outer}, whose folders only it "
                              "writes; create the new library outside it")
-        root.mkdir(parents=True, exist_ok=True)
-        tmp = root / f".library.json.{os.getpid()}.tmp"
-        tmp.write_text(json.dumps({"format": LIBRARY_FORMAT, "schema": SCHEMA_VERSION, "created": now_utc()}) + "\n")
-        os.replace(tmp, marker)
+        _create_marker(root)
         return
     try:
         head = json.loads(marker.read_text())
@@ -172,6 +174,91 @@ def check_marker(root: Path, create: bool) -> None:
         raise InputError(f"{root} is not an Arboretum library ({marker} has no '{LIBRARY_FORMAT}' marker)")
     if not isinstance(head.get("schema"), int) or head["schema"] > SCHEMA_VERSION:
         raise InputError(f"library {root} has schema {head.get('schema')!r}, newer than this Arboretum reads ({SCHEMA_VERSION})")
+
+
+_MARKER_TEMP = re.compile(r"\.library\.json\.(\d+)\.tmp")
+"""The temporary name ``library.json`` is written under (with the writer's pid) before its rename."""
+
+
+def _create_marker(root: Path) -> None:
+    """Write ``root/library.json`` through a temporary file, making ``root`` if missing. When that fails
+    (a full disk, Ctrl-C) the temporary file goes, and so does ``root`` if this call made it, so a retry
+    finds the folder as it was; a temporary file that a dead process left is removed."""
+    made = not root.exists()
+    tmp = root / f".library.json.{os.getpid()}.tmp"
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        tmp.write_text(json.dumps({"format": LIBRARY_FORMAT, "schema": SCHEMA_VERSION, "created": now_utc()}) + "\n")
+        os.replace(tmp, root / "library.json")
+    except BaseException as exc:
+        tmp.unlink(missing_ok=True)
+        if made:
+            with contextlib.suppress(OSError):
+                root.rmdir()
+        if isinstance(exc, OSError):
+            raise disk_error(root, exc, "it was not created") from None
+        raise
+    for p in root.iterdir():
+        if (m := _MARKER_TEMP.fullmatch(p.name)) and not _alive(int(m.group(1))):
+            p.unlink(missing_ok=True)  # a temporary file of a creation that died (another's is in use)
+
+
+def _alive(pid: int) -> bool:
+    """Whether a process ``pid`` runs (on this machine; one we may not signal runs too)."""
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except PermissionError:
+        return True
+    except (ProcessLookupError, OverflowError):
+        return False
+    return True
+
+
+class DiskError(StoreError, OSError):
+    """A library write failed for a reason of the disk (full, read-only, an I/O error). A ``StoreError``
+    (its ``str`` is one line for the user) that is also the ``OSError`` (with its ``errno``) it came from."""
+
+    cause = ""
+    """The OSError's own words: "No space left on device: FILE"."""
+
+    def __str__(self) -> str:
+        return str(self.strerror)
+
+
+def disk_failure(exc: BaseException, catalog: Path) -> OSError | None:
+    """``exc`` as an ``OSError`` when the disk caused it (SQLite's "database or disk is full" on the
+    ``catalog`` file becomes ENOSPC naming it), else None."""
+    if isinstance(exc, OSError):
+        return exc
+    if isinstance(exc, sqlite3.OperationalError) and getattr(exc, "sqlite_errorname", "") == "SQLITE_FULL":
+        return OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(catalog))
+    return None
+
+
+def disk_error(root: Path, exc: OSError, outcome: str) -> DiskError:
+    """``DiskError``: "library ROOT: no space left on device (ENOSPC, FILE); OUTCOME" for ``exc``."""
+    if isinstance(exc, DiskError):
+        return exc
+    why = str(exc.strerror or exc)
+    detail = ", ".join(str(d) for d in (errno.errorcode.get(exc.errno or 0, ""), exc.filename) if d)
+    reason = f"{why[:1].lower()}{why[1:]}{f' ({detail})' if detail else ''}"
+    err = DiskError(exc.errno or errno.EIO, f"library {root}: {reason}; {outcome}")
+    err.cause = f"{why}: {exc.filename}" if exc.filename else why
+    return err
+
+
+@contextlib.contextmanager
+def disk_errors(root: Path, outcome: str | Callable[[], str]) -> Iterator[None]:
+    """Raise what fails inside because of the disk (``disk_failure``) as ``disk_error(root, ...,
+    outcome)`` (``outcome`` may be a function, asked once it failed); anything else as it is."""
+    try:
+        yield
+    except BaseException as exc:
+        if (cause := disk_failure(exc, root / "catalog.sqlite")) is None:
+            raise
+        raise disk_error(root, cause, outcome if isinstance(outcome, str) else outcome()) from None
 
 
 def enclosing_library(path: Path) -> Path | None:
@@ -250,6 +337,14 @@ def read_revision(folder: Path) -> str:
     """Hex SHA-256 of ``folder/meta.json`` (which holds the arrays' SHA-256, so it names the whole example
     version). ``FileNotFoundError`` when there is none."""
     return hashlib.sha256((folder / META).read_bytes()).hexdigest()
+
+
+def holds(folder: Path, meta: bytes) -> bool:
+    """Whether ``folder`` holds an example whose meta.json is ``meta`` (a write put it in place)."""
+    try:
+        return (folder / META).read_bytes() == meta
+    except OSError:
+        return False
 
 
 _RENAME_EXCHANGE = 2

@@ -1,7 +1,8 @@
 """Crash consistency of an example library: write journals, and reconciling after a crash.
 
 Every write (add, replace, delete) first drops a small journal file in ``LIB/.tmp/`` naming the
-operation and the id, then renames whole folders and commits the catalog, then removes the journal.
+operation and the id, then renames whole folders and commits the catalog, then removes the journal; a
+group add journals all its ids once, and a failed one is taken back without writing (``take_back``).
 Writers hold the library's lock file while they do so, so a writer that finds anything in ``.tmp/``
 while holding the lock knows it is a crash leftover and calls ``reconcile``, which finishes or undoes
 each journalled operation, empties ``.tmp/``, re-indexes orphan folders (or moves broken ones to
@@ -77,10 +78,37 @@ def write_journal(tmp: Path, op: str, id_: str, aside: str | None, durable: bool
     ``op`` "add_group" with ``ids``: examples added all or none; a crash rolls every one of them back.
     """
     path = tmp / f"{unique(JOURNAL_PREFIX)}.json"
-    write_bytes(path, json.dumps({"op": op, "id": id_, "aside": aside, "ids": ids}).encode(), durable)
-    if durable:
-        fsync_path(tmp)
+    try:
+        write_bytes(path, json.dumps({"op": op, "id": id_, "aside": aside, "ids": ids}).encode(), durable)
+        if durable:
+            fsync_path(tmp)
+    except BaseException:  # a full disk, Ctrl-C: nothing was done yet, so no torn journal is left
+        path.unlink(missing_ok=True)
+        raise
     return path
+
+
+def take_back(con: sqlite3.Connection, root: Path, ids: list[str], staged: list[Path]) -> bool:
+    """Undo a group add (``ids``) that failed before it finished, deleting its folders in ``examples/``
+    and its staging folders ``staged``; True when all is undone, False when something could not be
+    (its group journal, still in ``.tmp/``, then makes the next writer finish). Needs no free space: no
+    journal is written (the group journal names every id), and the catalog never held their rows (they
+    are removed only if a COMMIT that reported an error went through after all)."""
+    try:
+        if any(catalog.get(con, id_) is not None for id_ in ids):
+            _transaction(con)
+            try:
+                catalog.remove(con, ids)
+                con.execute("COMMIT")
+            finally:
+                if con.in_transaction:
+                    con.execute("ROLLBACK")
+        for path in [root / "examples" / id_ for id_ in ids] + staged:
+            if path.exists():
+                shutil.rmtree(path)
+    except (OSError, sqlite3.Error):
+        return False
+    return True
 
 
 def _transaction(con: sqlite3.Connection):
@@ -107,9 +135,13 @@ def _finish(con: sqlite3.Connection, root: Path, journal: dict, report: Recovery
     """Complete (or roll back) one journalled operation."""
     id_, op = journal.get("id"), journal.get("op")
     if op == "add_group" and isinstance(journal.get("ids"), list):
-        for one in journal["ids"]:  # roll the whole group back
-            if isinstance(one, str) and valid_id(one):
-                _finish(con, root, {"op": "delete", "id": one}, report)
+        ids = [one for one in journal["ids"] if isinstance(one, str) and valid_id(one)]
+        _transaction(con)  # roll the whole group back: its rows in one go (readers see all or none)
+        catalog.remove(con, ids)
+        con.execute("COMMIT")
+        for one in ids:
+            if (root / "examples" / one).exists():
+                shutil.rmtree(root / "examples" / one)
         return
     if not isinstance(id_, str) or not valid_id(id_):
         return

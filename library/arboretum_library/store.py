@@ -14,6 +14,10 @@ read while one writes; writers take turns through the lock file, each waiting at
 seconds for it (then ``LibraryBusy``; see ``store_lock``). A reader finding the catalog missing or
 damaged raises ``CatalogDamaged``; a writer rebuilds it from the folders, and every open library
 reconnects when another process did (see ``store_catalog``). Crash recovery: ``recovery``.
+
+A write the disk refuses (full, read-only, an I/O error) raises ``DiskError``, one line naming the
+library, the cause and what became of the write ("nothing was stored"); a library whose folder vanished
+while open (deleted, moved, unmounted) raises ``LibraryGone`` and is never recreated by a write.
 """
 
 from __future__ import annotations
@@ -36,12 +40,15 @@ from .catalog import SCHEMA_VERSION, CatalogDamaged, Entry
 from .descriptors import CURVATURE_TAGS, relative_curvature_tags, tercile_bounds
 from .errors import StoreError
 from .folders import (
+    DiskError,
     check_marker,
+    disk_errors,
     encode,
     entry_for,
     exchange,
     free_ids,
     fsync_path,
+    holds,
     read_folder,
     read_provenance,
     read_revision,
@@ -50,11 +57,11 @@ from .folders import (
 )
 from .model import Example, Provenance
 from .progress import ProgressFn, no_progress
-from .recovery import Recovery, reconcile, unique, write_journal
+from .recovery import Recovery, reconcile, take_back, unique, write_journal
 from .store_catalog import CatalogLink
-from .store_lock import LOCK_TIMEOUT_S, LibraryBusy, WriteLock
+from .store_lock import LOCK_TIMEOUT_S, LibraryBusy, LibraryGone, WriteLock, check_present
 
-__all__ = ["CatalogDamaged", "Library", "LibraryBusy", "LOCK_TIMEOUT_S"]
+__all__ = ["CatalogDamaged", "DiskError", "Library", "LibraryBusy", "LibraryGone", "LOCK_TIMEOUT_S"]
 
 T = TypeVar("T")
 
@@ -93,15 +100,16 @@ class Library:
         if readonly:
             lib._catalog.connect()
             return lib
-        for sub in ("examples", ".tmp"):
-            (root / sub).mkdir(exist_ok=True)
-        try:
-            with lib._lock(finish_crashed=False):
-                lib._catalog.connect(locked=True)
-                lib.recovered.merge(reconcile(lib._con, root, full=True))
-        except BaseException:
-            lib.close()
-            raise
+        with disk_errors(root, "it cannot be opened to write"):
+            try:
+                for sub in ("examples", ".tmp"):
+                    (root / sub).mkdir(exist_ok=True)
+                with lib._lock(finish_crashed=False):
+                    lib._catalog.connect(locked=True)
+                    lib.recovered.merge(reconcile(lib._con, root, full=True))
+            except BaseException:
+                lib.close()
+                raise
         return lib
 
     @classmethod
@@ -118,8 +126,8 @@ class Library:
                 return cls.open(path, lock_timeout=lock_timeout, on_wait=on_wait)
             except OSError as why:
                 where = f": {why.filename}" if why.filename else ""
-                raise StoreError(f"{damaged}, but this process cannot write the library "
-                                 f"({why.strerror or why}{where})") from None
+                because = getattr(why, "cause", "") or f"{why.strerror or why}{where}"
+                raise StoreError(f"{damaged}, but this process cannot write the library ({because})") from None
 
     def close(self) -> None:
         self._catalog.close()
@@ -145,7 +153,7 @@ class Library:
         """The catalog row of ``id_`` (no arrays loaded), with the library's 'straight'/'curved' (``entries``)."""
         e = self._read(lambda con: catalog.get(con, id_))
         if e is None:
-            raise StoreError(f"no example {id_!r} in library {self.root}")
+            raise self._no_example(id_)
         return self._relative([e])[0]
 
     def entries(self, **filters) -> list[Entry]:
@@ -174,7 +182,7 @@ class Library:
         """Load example ``id_`` whole. ``StoreError`` names the id when missing, the file when broken."""
         folder = self._folder(id_)
         if not folder.is_dir():
-            raise StoreError(f"no example {id_!r} in library {self.root}")
+            raise self._no_example(id_)
         return read_folder(folder).example
 
     def provenance(self, id_: str) -> Provenance:
@@ -183,7 +191,7 @@ class Library:
         try:
             return read_provenance(self._folder(id_))
         except (FileNotFoundError, NotADirectoryError):
-            raise StoreError(f"no example {id_!r} in library {self.root}") from None
+            raise self._no_example(id_) from None
         except OSError as exc:
             raise StoreError(f"cannot read {exc.filename}: {exc.strerror}") from None
 
@@ -194,7 +202,7 @@ class Library:
         try:
             return read_revision(folder)
         except (FileNotFoundError, NotADirectoryError):
-            raise StoreError(f"no example {id_!r} in library {self.root}") from None
+            raise self._no_example(id_) from None
         except OSError as exc:
             raise StoreError(f"cannot read {exc.filename}: {exc.strerror}") from None
 
@@ -244,41 +252,72 @@ class Library:
 
     def add_new(self, examples: Iterable[Example], prefix: str = "ex") -> list[Example]:
         """Store ``examples`` under fresh ids ``PREFIX-NNNN`` picked while holding the write lock (so two
-        processes never pick the same), all or none: a failure (or Ctrl-C) takes back the ones already
-        stored, and a crash leaves a journal that the next writer uses to do so. Returns them renamed."""
+        processes never pick the same), all or none: their catalog rows are committed together, last, so
+        readers see none or all of them; a failure (or Ctrl-C) deletes the folders already in place, and a
+        crash (or a failure that cannot delete them) leaves the group journal, with which the next writer
+        does. Returns them renamed. On a full disk: ``DiskError`` "library LIB: no space left on device
+        (ENOSPC); nothing was stored"."""
         self._writable()
         todo = list(examples)
         with self._lock():
             ids = self._free_ids(prefix, len(todo))
             out = [with_fields(ex, id=i) for ex, i in zip(todo, ids, strict=True)]
-            group = write_journal(self.root / ".tmp", "add_group", "", None, self.durable, ids=ids)
-            try:
-                for ex in out:
-                    self.add(ex)
-            except BaseException:
-                for id_ in reversed(ids):  # if this fails too, the group journal makes the next writer do it
-                    if self._folder(id_).exists() or catalog.get(self._con, id_) is not None:
-                        self._delete(id_)
-                group.unlink()
-                raise
-            group.unlink()
+            with disk_errors(self.root, "nothing was stored"):
+                group = write_journal(self.root / ".tmp", "add_group", "", None, self.durable, ids=ids)
+            staged: list[Path] = []
+            undone = False
+            left = "nothing was stored (the next write to the library removes what is left)"
+            with disk_errors(self.root, lambda: "nothing was stored" if undone else left):
+                try:
+                    self._add_group(out, staged)
+                except BaseException:
+                    if undone := take_back(self._con, self.root, ids, staged):
+                        group.unlink(missing_ok=True)
+                    raise
+            group.unlink()  # stored; and durably so, or a power loss could bring the journal back, and with
+            if self.durable:  # it the next writer would take the run back
+                with contextlib.suppress(OSError):
+                    fsync_path(group.parent)
         return out
+
+    def _add_group(self, examples: list[Example], staged: list[Path]) -> None:
+        """Stage every example in ``.tmp/`` (listing the folders in ``staged``), rename each into
+        ``examples/``, then commit all their rows in one transaction: readers see none, then all."""
+        entries = []
+        for ex in examples:
+            meta, npz = encode(ex)
+            staged.append(self.root / ".tmp" / unique("stage-"))
+            write_folder(staged[-1], meta, npz, self.durable)
+            entries.append(entry_for(ex, json.loads(meta), len(meta) + len(npz)))
+        for ex, stage in zip(examples, staged, strict=True):
+            os.rename(stage, self._folder(ex.id))
+        if self.durable:
+            fsync_path(self.root / "examples")
+        self._catalog.commit(lambda con: [catalog.upsert(con, e) for e in entries])
 
     def put_encoded(self, example: Example, meta: bytes, npz: bytes, *, replace: bool = False) -> str:
         """Store ``example`` whose files ``encode`` produced (``meta``, ``npz``) atomically."""
         self._writable()
         self._folder(example.id)
         with self._lock():
-            self._put(example, meta, npz, replace=replace)
+            stage = self.root / ".tmp" / unique("stage-")
+            with disk_errors(self.root, lambda: f"example {example.id!r} was not stored" if not placed else
+                             f"the next write to the library finishes storing example {example.id!r}"):
+                try:
+                    self._put(example, meta, npz, stage, replace=replace)
+                except BaseException:
+                    with contextlib.suppress(OSError):  # (nothing left there is needed, see recovery)
+                        shutil.rmtree(stage)
+                    placed = holds(self._folder(example.id), meta)  # its journal: the next writer indexes it
+                    raise
         return example.id
 
-    def _put(self, example: Example, meta: bytes, npz: bytes, *, replace: bool) -> None:
-        """``put_encoded`` with the lock held."""
+    def _put(self, example: Example, meta: bytes, npz: bytes, stage: Path, *, replace: bool) -> None:
+        """``put_encoded`` with the lock held, staging the files in the new folder ``stage``."""
         target = self._folder(example.id)
         exists = target.exists() or catalog.get(self._con, example.id) is not None
         if exists and not replace:
             raise StoreError(f"example {example.id!r} already exists in library {self.root}")
-        stage = self.root / ".tmp" / unique("stage-")
         write_folder(stage, meta, npz, self.durable)
         entry = entry_for(example, json.loads(meta), len(meta) + len(npz))
         old, journal = self._swap_in(stage, target, example.id)
@@ -313,19 +352,21 @@ class Library:
         target = self._folder(id_)
         with self._lock():
             if not target.exists() and catalog.get(self._con, id_) is None:
-                raise StoreError(f"no example {id_!r} in library {self.root}")
+                raise self._no_example(id_)
             self._delete(id_)
 
     def _delete(self, id_: str) -> None:
         """``delete`` with the lock held."""
         target = self._folder(id_)
-        journal = write_journal(self.root / ".tmp", "delete", id_, None, self.durable)
-        self._catalog.commit(lambda con: catalog.remove(con, [id_]))
-        if target.exists():
-            trash = self.root / ".tmp" / unique("trash-")
-            os.rename(target, trash)
-            shutil.rmtree(trash)
-        journal.unlink()
+        with disk_errors(self.root, f"example {id_!r} was not deleted"):
+            journal = write_journal(self.root / ".tmp", "delete", id_, None, self.durable)
+        with disk_errors(self.root, f"the next write to the library finishes deleting example {id_!r}"):
+            self._catalog.commit(lambda con: catalog.remove(con, [id_]))
+            if target.exists():
+                trash = self.root / ".tmp" / unique("trash-")
+                os.rename(target, trash)
+                shutil.rmtree(trash)
+            journal.unlink()
 
     # -- archives ----------------------------------------------------------------------------
     def export_archive(self, path: str | os.PathLike, progress: ProgressFn = no_progress) -> dict:
@@ -346,6 +387,11 @@ class Library:
         if not isinstance(id_, str) or not valid_id(id_):
             raise StoreError(f"{id_!r} is not a valid example id (letters, digits, '-' and '_')")
         return self.root / "examples" / id_
+
+    def _no_example(self, id_: str) -> StoreError:
+        """The error for a missing example: ``LibraryGone`` raised instead when the whole library is."""
+        check_present(self.root)
+        return StoreError(f"no example {id_!r} in library {self.root}")
 
     def _writable(self) -> None:
         if self.readonly:
@@ -380,8 +426,13 @@ class Library:
         return self._catalog.con
 
     def _read(self, query: Callable[[sqlite3.Connection], T]) -> T:
-        """``query(con)`` on a current catalog; a writer rebuilds a damaged catalog once and retries."""
-        return self._catalog.read(query, None if self.readonly else self._rebuild_catalog)
+        """``query(con)`` on a current catalog; a writer rebuilds a damaged catalog once and retries.
+        ``LibraryGone`` when the catalog went with the whole library."""
+        try:
+            return self._catalog.read(query, None if self.readonly else self._rebuild_catalog)
+        except CatalogDamaged:
+            check_present(self.root)
+            raise
 
     def _rebuild_catalog(self) -> None:
         with self._lock():  # taking the lock reconnects, rebuilding a damaged catalog

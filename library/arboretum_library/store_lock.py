@@ -1,4 +1,5 @@
 """The write lock of an example library: ``LIB/.lock``, held (``flock``) by the one process writing.
+A library whose folder vanished meanwhile is ``LibraryGone``, never recreated by a write.
 
 Any number of processes read without it. A writer waits for it at most a given number of seconds (then
 ``LibraryBusy``), telling whoever waits through ``on_wait``; the thread holding it may take it again
@@ -29,6 +30,21 @@ class LibraryBusy(StoreError):
     code = "busy"
 
 
+class LibraryGone(StoreError):
+    """The library's folder (its ``library.json``) is gone while it is open: deleted or moved away."""
+
+
+def check_present(root: Path) -> None:
+    """``LibraryGone`` unless ``root`` still holds the ``library.json`` it was opened with: a library
+    deleted (or unmounted) while open is never written (or rebuilt) again as if it were new and empty."""
+    if not (root / "library.json").is_file():
+        raise _gone(root)
+
+
+def _gone(root: Path) -> LibraryGone:
+    return LibraryGone(f"library {root} is gone (deleted or moved while it was open?)")
+
+
 class WriteLock:
     """The lock file of the library at ``root``, as one ``Library`` holds it (re-entrant per thread)."""
 
@@ -44,8 +60,13 @@ class WriteLock:
     def hold(self, timeout: float | None, on_wait: Callable[[str], None] | None) -> Iterator[None]:
         """Take the lock, waiting at most ``timeout`` seconds (None: as long as it takes) for another
         writer, else ``LibraryBusy``; ``on_wait`` is told once when the wait begins. Ctrl-C stops a wait.
-        Call only when not ``held_here()``."""
-        with open(self.root / LOCK_FILE, "a+b") as f:
+        Call only when not ``held_here()``. ``LibraryGone`` when the library is."""
+        check_present(self.root)
+        try:
+            f = open(self.root / LOCK_FILE, "a+b")  # noqa: SIM115 (a with-block below closes it)
+        except FileNotFoundError:  # deleted since the check
+            raise _gone(self.root) from None
+        with f:
             waiting = f"waiting for the library {self.root}: another process is writing it (Ctrl-C to stop)"
             tell = (lambda: on_wait(waiting)) if on_wait is not None else None
             if not wait_for_lock(f.fileno(), timeout, tell):

@@ -7,7 +7,7 @@ from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from arboretum_library.errors import InputError
+from arboretum_library.errors import InputError, StoreError
 from arboretum_library.model import Example
 from arboretum_library.store import Library
 from arboretum_server.assembly.recombine import RecombineOptions
@@ -38,9 +38,13 @@ class Context:
     _examples: OrderedDict = field(default_factory=OrderedDict)
 
     def library(self) -> Library:
-        """The example library (opened on first use; created if missing)."""
+        """The example library (opened on first use; created if missing). ``StoreError`` once it is gone
+        (deleted, moved, unmounted): never made anew behind the sessions' backs, which name its examples."""
         if self.library_path is None:
             raise InputError("this server has no example library (start it with --library LIB)")
+        if self._library is not None and not (Path(self.library_path) / "library.json").is_file():
+            raise StoreError(f"library {self.library_path} is gone (deleted while the server ran?); put it "
+                             "back, or restart the server to start a new one")
         if self._library is None:
             self._library = Library.open(self.library_path, create=True, lock_timeout=self.lock_timeout)
             r = self._library.recovered

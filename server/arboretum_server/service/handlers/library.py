@@ -79,7 +79,7 @@ def import_job(progress, library_path: str, points: np.ndarray, labels: np.ndarr
     said = notes(opts, dec.stats)  # before anything is stored
     prov = Provenance(name, "", opts.species, opts.as_dict())
     stem = "".join(c if c.isalnum() or c in "-_" else "-" for c in name)[:60] or "scan"
-    with Library.open(library_path, create=True) as lib:
+    with Library.open(library_path) as lib:  # made by import_scan (ctx.library()): a library gone meanwhile stays gone
         examples = lib.add_new(make_examples(dec.hbl, prov), stem)  # ids picked under the lock
     return {"ids": [e.id for e in examples], "stats": dec.stats, "notes": said}
 
