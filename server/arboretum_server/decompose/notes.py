@@ -46,6 +46,11 @@ def scan_notes(stats: dict) -> list[str]:
     """Notes on the cloud itself (repeated points, all foliage, a straight line, trunk-like columns away
     from the root), which refinement does not change. A figure missing from ``stats`` gives no note."""
     out = [n for n in [repeated_note(stats.get("repeated"))] if n]
+    if stats.get("strays"):
+        n = stats["strays"]
+        out.append(f"{n} stray point{'s' if n > 1 else ''} left out: each stands over a tenth of the tree's height "
+                   "from its 4 nearest other points (scanner noise, a bird?), and would have set the trunk base "
+                   "or the height")
     leaf = stats.get("leaf_points", 0) / max(stats.get("points", 0), 1)
     if leaf >= ALL_LEAF:
         out.append(f"{leaf:.1%} of the points are foliage ({stats['labels']} labels) and almost none wood: the "

@@ -184,7 +184,7 @@ def decompose(points: np.ndarray, options: DecomposeOptions = DecomposeOptions()
     lobe_of[fol] = k_lab
     stats = {
         "points": len(pts), "height": WORK_HEIGHT / prep.scale, "leaf_points": int((lab == LEAF).sum()),
-        "ground_removed": prep.ground_removed, "repeated": prep.repeats.as_stats(),
+        "ground_removed": prep.ground_removed, "repeated": prep.repeats.as_stats(), "strays": prep.strays,
         "trunk_columns": [c._asdict() | {"foot": list(c.foot)} for c in prep.columns], "width_ratio": width_ratio(pts),
         "labels": "given" if prep.labels is not None else "guessed",
         "components": g.components, "bridges": g.bridges, "foliage_source": source,

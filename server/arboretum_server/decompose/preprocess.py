@@ -39,6 +39,16 @@ PILE_APART = 0.25
 """The most repeated point is left out when every other point lies farther from it than this fraction of
 their height: a scanner's no-return rows (0, 0, 0), far from a tree in a georeferenced frame, would
 otherwise set the trunk base or the height as a lone point (below the tree: the root moves onto it)."""
+STRAY_APART = 0.1
+"""A point is a stray when its ``STRAY_NEIGHBOURS``-th nearest neighbour lies farther than this fraction
+of the cloud's height (0.1-99.9 percentile of z), and than ``STRAY_SPACING`` times the median such
+distance (sparse photo clouds): one stray point 10 m under a 24.5 m tree became its trunk base."""
+STRAY_NEIGHBOURS = 4
+"""Groups of at most this many points standing apart count as strays (a noisy return, a bird)."""
+STRAY_SPACING = 10.0
+"""How many times the cloud's median neighbour distance a stray must stand apart, at least."""
+
+
 @dataclass(frozen=True, eq=False)
 class Prepared:
     """A cloud ready for decomposition, in the normalised frame."""
@@ -60,6 +70,8 @@ class Prepared:
     another tree standing higher?"""
     repeats: Repeats = Repeats(0, 0, 0, 1, 1, None)
     """Exact duplicates merged before anything else (``distinct_rows``)."""
+    strays: int = 0
+    """Points of the sample left out as strays (``strays``)."""
 
 
 def validate(points: np.ndarray, options: DecomposeOptions) -> np.ndarray:
@@ -180,6 +192,8 @@ def prepare(
         raise InputError(f"point cloud: only {len(idx)} points remain after removing the ground")
     if options.points and len(idx) > options.points:
         idx = np.sort(rng.choice(idx, options.points, replace=False))
+    stray = strays(pts[idx])
+    idx = idx[~stray]
     sub = pts[idx]
     _check_counts(len(sub), options)
     root = find_root(sub, plane)
@@ -193,7 +207,23 @@ def prepare(
         if lab.shape[0] != len(pts):
             raise InputError(f"labels: {lab.shape[0]} labels for {len(pts)} points")
         lab = (lab[idx] > 0).astype(np.uint8)
-    return Prepared((sub - root) * scale, idx, lab, root, scale, int(ground.sum()), tuple(cols), repeats)
+    return Prepared((sub - root) * scale, idx, lab, root, scale, int(ground.sum()), tuple(cols), repeats,
+                    int(stray.sum()))
+
+
+def strays(pts: np.ndarray) -> np.ndarray:
+    """(N,) bool: the points of ``pts`` (N, 3) standing apart (``STRAY_APART``): each has fewer than
+    ``STRAY_NEIGHBOURS`` other points within that distance. Few enough points are left for a tree."""
+    from scipy.spatial import cKDTree
+
+    k = STRAY_NEIGHBOURS + 1
+    if len(pts) <= 10 * k:
+        return np.zeros(len(pts), bool)
+    lo, hi = np.percentile(pts[:, 2], [0.1, 99.9])
+    d, _ = cKDTree(pts).query(pts, k)
+    far = max(STRAY_APART * float(hi - lo), STRAY_SPACING * float(np.median(d[:, -1])))
+    out = d[:, -1] > far
+    return out if out.sum() <= 0.01 * len(pts) else np.zeros(len(pts), bool)  # a sparse cloud, not strays
 
 
 def _usable(pts: np.ndarray, options: DecomposeOptions) -> tuple[np.ndarray, Repeats]:
