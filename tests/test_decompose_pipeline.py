@@ -472,7 +472,7 @@ def test_cli_stores_examples_and_saves_hbl(truth, tmp_path, capsys):
     assert len(err) == 1 and "--save-hbl /proc/arboretum-hbl.npz: cannot write it" in err[0]
     with Library.open(lib) as library:  # nothing stored by the refused runs
         assert sorted(library.ids()) == sorted(data["stored"])
-    import arboretum_library.store as store
+    import arboretum_library.store_write as store
 
     real_write, calls = store.write_folder, []
 

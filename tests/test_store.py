@@ -57,7 +57,7 @@ def test_duplicate_replace_delete(lib, rng):
 
 
 def test_replace_without_renameat2_falls_back_to_two_renames(lib, rng, monkeypatch):
-    import arboretum_library.store as store
+    import arboretum_library.store_write as store
 
     monkeypatch.setattr(store, "exchange", lambda a, b: False)
     a, b = make_example(rng, id="r", n_lobes=1), make_example(rng, id="r", n_lobes=6)

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import arboretum_library.store as store
+import arboretum_library.store_write as store
 from arboretum_library import protocol as P
 from arboretum_library.cli import main
 from arboretum_library.errors import StoreError

@@ -13,7 +13,9 @@ A ``Library`` holds a path and one SQLite connection; use one per thread. Any nu
 read while one writes; writers take turns through the lock file, each waiting at most ``lock_timeout``
 seconds for it (then ``LibraryBusy``; see ``store_lock``). A reader finding the catalog missing or
 damaged raises ``CatalogDamaged``; a writer rebuilds it from the folders, and every open library
-reconnects when another process did (see ``store_catalog``). Crash recovery: ``recovery``.
+reconnects when another process did (see ``store_catalog``). How a write is staged, journaled and
+committed (``add``, ``add_new``, ``put_encoded``, ``delete``, ``locked``): ``store_write``, whose
+``LibraryWrites`` ``Library`` inherits. Crash recovery: ``recovery``.
 
 A write the disk refuses (full, read-only, an I/O error) raises ``DiskError``, one line naming the
 library, the cause and what became of the write ("nothing was stored"); a library whose folder vanished
@@ -23,9 +25,7 @@ while open (deleted, moved, unmounted) raises ``LibraryGone`` and is never recre
 from __future__ import annotations
 
 import contextlib
-import json
 import os
-import shutil
 import sqlite3
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import replace as with_fields
@@ -43,31 +43,29 @@ from .folders import (
     DiskError,
     check_marker,
     disk_errors,
-    encode,
-    entry_for,
-    exchange,
     free_ids,
-    fsync_path,
-    holds,
     read_folder,
     read_provenance,
     read_revision,
     valid_id,
-    write_folder,
 )
 from .model import Example, Provenance
 from .progress import ProgressFn, no_progress
-from .recovery import Recovery, reconcile, take_back, unique, write_journal
+from .recovery import Recovery, reconcile
 from .store_catalog import CatalogLink
 from .store_lock import LOCK_TIMEOUT_S, LibraryBusy, LibraryGone, WriteLock, check_present
+from .store_write import LibraryWrites
 
 __all__ = ["CatalogDamaged", "DiskError", "Library", "LibraryBusy", "LibraryGone", "LOCK_TIMEOUT_S"]
 
 T = TypeVar("T")
 
 
-class Library:
-    """An open example library. Create with ``Library.open``; close with ``close()`` or ``with``."""
+class Library(LibraryWrites):
+    """An open example library. Create with ``Library.open``; close with ``close()`` or ``with``.
+
+    Opening, reading and the lock are here; ``add``, ``add_many``, ``add_new``, ``put_encoded``,
+    ``delete`` and ``locked`` come from ``store_write.LibraryWrites``."""
 
     def __init__(self, root: Path, readonly: bool, durable: bool, lock_timeout: float | None = LOCK_TIMEOUT_S,
                  on_wait: Callable[[str], None] | None = None) -> None:
@@ -235,139 +233,6 @@ class Library:
     def _free_ids(self, prefix: str, count: int) -> list[str]:
         return free_ids(self.ids(), self.root / "examples", prefix, count)
 
-    # -- writing -----------------------------------------------------------------------------
-    def add(self, example: Example, *, replace: bool = False) -> str:
-        """Store ``example`` atomically; ``StoreError`` if its id exists (unless ``replace``)."""
-        meta, npz = encode(example)
-        return self.put_encoded(example, meta, npz, replace=replace)
-
-    def add_many(self, examples: Iterable[Example], *, replace: bool = False,
-                 progress: ProgressFn = no_progress, total: int = 0) -> list[str]:
-        """Add each of ``examples`` (each one atomically); returns their ids."""
-        done = []
-        for ex in examples:
-            done.append(self.add(ex, replace=replace))
-            progress(len(done), max(total, len(done)), "adding examples")
-        return done
-
-    def add_new(self, examples: Iterable[Example], prefix: str = "ex") -> list[Example]:
-        """Store ``examples`` under fresh ids ``PREFIX-NNNN`` picked while holding the write lock (so two
-        processes never pick the same), all or none: their catalog rows are committed together, last, so
-        readers see none or all of them; a failure (or Ctrl-C) deletes the folders already in place, and a
-        crash (or a failure that cannot delete them) leaves the group journal, with which the next writer
-        does. Returns them renamed. On a full disk: ``DiskError`` "library LIB: no space left on device
-        (ENOSPC); nothing was stored"."""
-        self._writable()
-        todo = list(examples)
-        with self._lock():
-            ids = self._free_ids(prefix, len(todo))
-            out = [with_fields(ex, id=i) for ex, i in zip(todo, ids, strict=True)]
-            with disk_errors(self.root, "nothing was stored"):
-                group = write_journal(self.root / ".tmp", "add_group", "", None, self.durable, ids=ids)
-            staged: list[Path] = []
-            undone = False
-            left = "nothing was stored (the next write to the library removes what is left)"
-            with disk_errors(self.root, lambda: "nothing was stored" if undone else left):
-                try:
-                    self._add_group(out, staged)
-                except BaseException:
-                    if undone := take_back(self._con, self.root, ids, staged):
-                        group.unlink(missing_ok=True)
-                    raise
-            group.unlink()  # stored; and durably so, or a power loss could bring the journal back, and with
-            if self.durable:  # it the next writer would take the run back
-                with contextlib.suppress(OSError):
-                    fsync_path(group.parent)
-        return out
-
-    def _add_group(self, examples: list[Example], staged: list[Path]) -> None:
-        """Stage every example in ``.tmp/`` (listing the folders in ``staged``), rename each into
-        ``examples/``, then commit all their rows in one transaction: readers see none, then all."""
-        entries = []
-        for ex in examples:
-            meta, npz = encode(ex)
-            staged.append(self.root / ".tmp" / unique("stage-"))
-            write_folder(staged[-1], meta, npz, self.durable)
-            entries.append(entry_for(ex, json.loads(meta), len(meta) + len(npz)))
-        for ex, stage in zip(examples, staged, strict=True):
-            os.rename(stage, self._folder(ex.id))
-        if self.durable:
-            fsync_path(self.root / "examples")
-        self._catalog.commit(lambda con: [catalog.upsert(con, e) for e in entries])
-
-    def put_encoded(self, example: Example, meta: bytes, npz: bytes, *, replace: bool = False) -> str:
-        """Store ``example`` whose files ``encode`` produced (``meta``, ``npz``) atomically."""
-        self._writable()
-        self._folder(example.id)
-        with self._lock():
-            stage = self.root / ".tmp" / unique("stage-")
-            with disk_errors(self.root, lambda: f"example {example.id!r} was not stored" if not placed else
-                             f"the next write to the library finishes storing example {example.id!r}"):
-                try:
-                    self._put(example, meta, npz, stage, replace=replace)
-                except BaseException:
-                    with contextlib.suppress(OSError):  # (nothing left there is needed, see recovery)
-                        shutil.rmtree(stage)
-                    placed = holds(self._folder(example.id), meta)  # its journal: the next writer indexes it
-                    raise
-        return example.id
-
-    def _put(self, example: Example, meta: bytes, npz: bytes, stage: Path, *, replace: bool) -> None:
-        """``put_encoded`` with the lock held, staging the files in the new folder ``stage``."""
-        target = self._folder(example.id)
-        exists = target.exists() or catalog.get(self._con, example.id) is not None
-        if exists and not replace:
-            raise StoreError(f"example {example.id!r} already exists in library {self.root}")
-        write_folder(stage, meta, npz, self.durable)
-        entry = entry_for(example, json.loads(meta), len(meta) + len(npz))
-        old, journal = self._swap_in(stage, target, example.id)
-        self._catalog.commit(lambda con: catalog.upsert(con, entry))
-        if old is not None:
-            shutil.rmtree(old)
-        journal.unlink()
-
-    def _swap_in(self, stage: Path, target: Path, id_: str) -> tuple[Path | None, Path]:
-        """Rename the staged folder to ``target``; returns where the replaced folder went, the journal."""
-        tmp = self.root / ".tmp"
-        if not target.exists():
-            journal = write_journal(tmp, "add", id_, None, self.durable)
-            os.rename(stage, target)
-            old = None
-        else:
-            aside = unique("aside-")
-            journal = write_journal(tmp, "replace", id_, aside, self.durable)
-            if exchange(stage, target):
-                old = stage
-            else:
-                os.rename(target, tmp / aside)
-                os.rename(stage, target)
-                old = tmp / aside
-        if self.durable:
-            fsync_path(target.parent)
-        return old, journal
-
-    def delete(self, id_: str) -> None:
-        """Remove example ``id_`` (catalog row first, then its folder)."""
-        self._writable()
-        target = self._folder(id_)
-        with self._lock():
-            if not target.exists() and catalog.get(self._con, id_) is None:
-                raise self._no_example(id_)
-            self._delete(id_)
-
-    def _delete(self, id_: str) -> None:
-        """``delete`` with the lock held."""
-        target = self._folder(id_)
-        with disk_errors(self.root, f"example {id_!r} was not deleted"):
-            journal = write_journal(self.root / ".tmp", "delete", id_, None, self.durable)
-        with disk_errors(self.root, f"the next write to the library finishes deleting example {id_!r}"):
-            self._catalog.commit(lambda con: catalog.remove(con, [id_]))
-            if target.exists():
-                trash = self.root / ".tmp" / unique("trash-")
-                os.rename(target, trash)
-                shutil.rmtree(trash)
-            journal.unlink()
-
     # -- archives ----------------------------------------------------------------------------
     def export_archive(self, path: str | os.PathLike, progress: ProgressFn = no_progress) -> dict:
         """Write the whole library to one .tar archive (see ``archive``); returns a summary."""
@@ -392,16 +257,6 @@ class Library:
         """The error for a missing example: ``LibraryGone`` raised instead when the whole library is."""
         check_present(self.root)
         return StoreError(f"no example {id_!r} in library {self.root}")
-
-    def _writable(self) -> None:
-        if self.readonly:
-            raise StoreError(f"library {self.root} was opened read-only")
-
-    def locked(self) -> contextlib.AbstractContextManager[None]:
-        """Hold the write lock over several steps (check, then write) that another writer must not
-        interleave; the store's own writes inside take it again (re-entrant for this thread)."""
-        self._writable()
-        return self._lock()
 
     @contextlib.contextmanager
     def _lock(self, finish_crashed: bool = True) -> Iterator[None]:
