@@ -55,3 +55,30 @@ def test_a_sparse_cloud_has_no_strays():
     sparse = np.c_[rng.normal(0, 2, (120, 2)), rng.uniform(0, 6, 120)]  # a photo cloud's spacing
     assert not strays(sparse).any()
     assert not strays(sparse[:40]).any()  # too few points to judge
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_cell_search_for_large_clouds_finds_what_the_exact_one_does(seed):
+    from scipy.spatial import cKDTree
+
+    from arboretum_server.decompose.preprocess import _apart
+
+    rng = np.random.default_rng(seed)
+    cloud = np.vstack([rng.normal(0, 1, (20000, 3)) * [1, 1, 3],  # a crowd, then sparse points around it at
+                       rng.uniform(-12, 12, (300, 3))])  # every distance from the far threshold
+    far = float(rng.uniform(0.8, 2.0))
+    exact = cKDTree(cloud).query(cloud, 5)[0][:, -1] > far  # fewer than 4 others within far
+    fast = _apart(cloud, far, 5)
+    assert 10 < exact.sum() < 1000 and np.array_equal(fast, exact)
+
+
+def test_a_large_cloud_takes_the_cell_search(tree, monkeypatch):
+    from arboretum_server.decompose import preprocess
+
+    big = np.vstack([tree] * 10) + np.random.default_rng(3).normal(0, 1e-4, (10 * len(tree), 3))
+    stray = big[np.argmin(big[:, 2])] - [0.0, 0.0, 0.5 * float(np.ptp(big[:, 2]))]
+    called, real = [], preprocess._apart
+    monkeypatch.setattr(preprocess, "_apart", lambda *a: called.append(1) or real(*a))
+    out = preprocess.strays(np.vstack([big, stray]))
+    assert called == [1] and np.flatnonzero(out).tolist() == [len(big)]
+

@@ -91,3 +91,21 @@ def test_the_client_status_line_says_a_repeat_stored_nothing():
     assert committed(["toy-0001", "toy-0002"], ("3 lobes asked, 2 found", note)) == f"{note}; 3 lobes asked, 2 found"
     assert committed(["a"], ("1 of 1 examples have no lobes: they grow no twigs or leaves",)) == (
         "stored a; 1 of 1 examples have no lobes: they grow no twigs or leaves")
+
+
+def test_ids_given_to_another_tree_since_are_no_repeat(server, draft):
+    # helper-88: after the committed examples were deleted, the next writer of that name got the same ids;
+    # a second press then stored nothing and answered the other tree's ids
+    first = ok(server, P.RefineCommit(session=draft)).ids
+    for i in first:
+        ok(server, P.LibraryDelete(id=i))
+    other = ok(server, P.SessionNew()).session
+    from arboretum_server.decompose.toytree import toy_scan, toy_truth
+
+    pts, labels = toy_scan(toy_truth(), n=4000, seed=7)
+    ok(server, P.RefineOpen(session=other, points=pts, labels=labels, name="toy",
+                            options={"n_main": 3, "n_lobes": 4, "points": 4000}))
+    assert ok(server, P.RefineCommit(session=other)).ids == first  # the freed ids, another tree
+    again = ok(server, P.RefineCommit(session=draft))
+    assert not set(again.ids) & set(first) and len(library_ids(server)) == 6
+    assert not any("committed already" in n for n in again.notes)

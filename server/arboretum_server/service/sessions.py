@@ -43,9 +43,10 @@ class RefineDraft:
     revision: int = 0
     generation: str = ""
     """Token of the saved source this draft journals its edits under (``refine_store``)."""
-    committed: tuple[Any, tuple[str, ...]] | None = None
-    """(the state last committed, the ids it was stored under): a second commit of that same state
-    (a double press) answers those ids instead of storing copies (in memory: not after a restart)."""
+    committed: tuple[Any, dict[str, str]] | None = None
+    """(the state last committed, the id -> revision of each example it was stored as): a second commit
+    of that same state (a double press), while those examples are unchanged, answers their ids instead of
+    storing copies (in memory: not after a restart)."""
 
     @property
     def current(self) -> Any:

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from arboretum_library import protocol as P
-from arboretum_library.errors import InputError
+from arboretum_library.errors import InputError, StoreError
 from arboretum_server.service import refine_store
 from arboretum_server.service.context import Context
 from arboretum_server.service.handlers.assembly import checked_strokes
@@ -154,8 +154,8 @@ def commit(ctx: Context, req: P.RefineCommit):
         said = tuple(option_notes(dec.options) + scan_notes(dec.stats))  # the user chose the lobe count
         lib = ctx.library()
         stats = {"lobes": len(dec.lobes)}
-        if d.committed is not None and d.committed[0] is dec and set(d.committed[1]) <= set(lib.ids()):
-            ids = d.committed[1]
+        if d.committed is not None and d.committed[0] is dec and _unchanged(lib, d.committed[1]):
+            ids = tuple(d.committed[1])
             return P.LibraryImported(ids=ids, stats=stats, notes=said + (
                 f"this draft was committed already, unchanged since, as {_span(ids)}: not stored again",))
         prov = Provenance(d.name, "", dec.options.species, dec.options.as_dict())
@@ -163,13 +163,22 @@ def commit(ctx: Context, req: P.RefineCommit):
         made = make_examples(dec.hbl, prov)
         bare = sum(not e.structure.lobes for e in made)
         examples = lib.add_new(made, stem)  # ids picked under the lock
-        d.committed = (dec, tuple(e.id for e in examples))
+        d.committed = (dec, {e.id: lib.revision(e.id) for e in examples})
         if bare:
             said += (f"{bare} of {len(made)} examples have no lobes: "
                      "they grow no twigs or leaves",)
-        return P.LibraryImported(ids=d.committed[1], stats=stats, notes=said)
+        return P.LibraryImported(ids=tuple(d.committed[1]), stats=stats, notes=said)
 
     return _with_draft(ctx, req.session, then)
+
+
+def _unchanged(lib, revisions: dict[str, str]) -> bool:
+    """Whether every example a commit stored is still in ``lib`` as it stored it (an id freed by a delete is
+    given to the next writer of that name: the same id then holds another tree)."""
+    try:
+        return all(lib.revision(i) == r for i, r in revisions.items())
+    except StoreError:  # deleted
+        return False
 
 
 def _span(ids: tuple[str, ...]) -> str:
