@@ -154,6 +154,28 @@ def held_lock(path: Path):
 
 
 @contextlib.contextmanager
+def held_folder(folder: Path):
+    """Make ``folder`` and hold its ``flock`` on another descriptor, as another ``keys generate`` would;
+    yields a function that releases it early (it is released on exit otherwise)."""
+    import os
+
+    folder.mkdir()
+    fd = os.open(folder, os.O_RDONLY)
+    fcntl.flock(fd, fcntl.LOCK_EX)
+    closed: list[bool] = []
+
+    def release() -> None:
+        if not closed:
+            closed.append(True)
+            os.close(fd)
+
+    try:
+        yield release
+    finally:
+        release()
+
+
+@contextlib.contextmanager
 def serving(server):
     """Run ``server`` (a ``service.socket.Server``) on a daemon thread; stop it and wait for the thread on
     exit (at most 10 s), asserting it ended."""
@@ -167,3 +189,25 @@ def serving(server):
         server.stop_event.set()
         thread.join(10)
     assert not thread.is_alive()
+
+
+@contextlib.contextmanager
+def dispatcher(state: Path, library: Path):
+    """An in-process service: a ``Dispatcher`` over a ``Context`` with sessions in ``state`` and the library
+    at ``library``, closed on exit."""
+    from arboretum_server.service.context import Context
+    from arboretum_server.service.dispatch import Dispatcher
+    from arboretum_server.service.sessions import Sessions
+
+    ctx = Context(Sessions(state), library)
+    try:
+        yield Dispatcher(ctx)
+    finally:
+        ctx.close()
+
+
+def reply_of(d, req):
+    """The reply of the ``Dispatcher`` ``d`` to ``req``, asserted to be the request's reply type (no Error)."""
+    reply = d.run(req)
+    assert isinstance(reply, req.REPLY), reply
+    return reply

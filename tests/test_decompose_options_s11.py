@@ -25,10 +25,8 @@ from arboretum_server.decompose.options import (
     DecomposeOptions,
 )
 from arboretum_server.decompose.preprocess import POINTS_PER_LOBE
-from arboretum_server.service.context import Context
-from arboretum_server.service.dispatch import Dispatcher
 from arboretum_server.service.handlers.library import options_from
-from arboretum_server.service.sessions import Sessions
+from factories import dispatcher
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
@@ -133,9 +131,8 @@ def test_a_huge_value_is_shown_short():
 @pytest.fixture
 def server(tmp_path):
     Library.open(tmp_path / "lib", create=True).close()
-    ctx = Context(Sessions(tmp_path / "state"), tmp_path / "lib")
-    yield Dispatcher(ctx)
-    ctx.close()
+    with dispatcher(tmp_path / "state", tmp_path / "lib") as d:
+        yield d
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,6 @@ cut) between its two renames is finished by the next run, and until then ``serve
 
 from __future__ import annotations
 
-import fcntl
 import os
 import shutil
 import subprocess
@@ -23,6 +22,7 @@ from arboretum_library.errors import InputError
 from arboretum_library.remote import Remote, client_keys, load_key, same_pair
 from arboretum_server.service.cli import check_client_pairs, curve_keys
 from arboretum_server.service.keys import generate
+from factories import held_folder
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -244,19 +244,8 @@ def test_remote_names_both_files_when_the_secret_disagrees_with_clients_key(tmp_
 @pytest.fixture
 def held(tmp_path):
     """``tmp_path / 'k'`` with its ``flock`` held on another descriptor (as another run would)."""
-    k = tmp_path / "k"
-    k.mkdir()
-    fd = os.open(k, os.O_RDONLY)
-    fcntl.flock(fd, fcntl.LOCK_EX)
-    closed: list[bool] = []
-
-    def release() -> None:
-        if not closed:
-            closed.append(True)
-            os.close(fd)
-
-    yield release
-    release()
+    with held_folder(tmp_path / "k") as release:
+        yield release
 
 
 def _keys(argv: list[str], capsys) -> tuple[int, list[str], float]:

@@ -10,9 +10,7 @@ import pytest
 
 from arboretum_library import protocol as P
 from arboretum_library.store import Library
-from arboretum_server.service.context import Context
-from arboretum_server.service.dispatch import Dispatcher
-from arboretum_server.service.sessions import Sessions
+from factories import dispatcher, reply_of
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
@@ -20,15 +18,11 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 @pytest.fixture
 def server(tmp_path):
     Library.open(tmp_path / "lib", create=True).close()
-    ctx = Context(Sessions(tmp_path / "state"), tmp_path / "lib")
-    yield Dispatcher(ctx)
-    ctx.close()
+    with dispatcher(tmp_path / "state", tmp_path / "lib") as d:
+        yield d
 
 
-def ok(d: Dispatcher, req: P.Request):
-    reply = d.run(req)
-    assert isinstance(reply, req.REPLY), reply
-    return reply
+ok = reply_of
 
 
 @pytest.fixture

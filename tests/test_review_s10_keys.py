@@ -22,6 +22,7 @@ from arboretum_library.errors import InputError
 from arboretum_library.remote import Remote, load_key
 from arboretum_server.service.cli import check_server_public, curve_keys
 from arboretum_server.service.keys import generate
+from factories import held_folder
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -182,19 +183,8 @@ def test_public_key_files_still_load_and_secrets_load_only_as_secrets(tmp_path):
 def held(tmp_path):
     """The key folder ``tmp_path / 'k'``, with its ``flock`` held here on another descriptor (as another
     run would); yields a function releasing it."""
-    k = tmp_path / "k"
-    k.mkdir()
-    fd = os.open(k, os.O_RDONLY)
-    fcntl.flock(fd, fcntl.LOCK_EX)
-    closed = []
-
-    def release() -> None:
-        if not closed:
-            closed.append(True)
-            os.close(fd)
-
-    yield release
-    release()
+    with held_folder(tmp_path / "k") as release:
+        yield release
 
 
 def test_a_busy_folder_is_told_once_then_given_up_with_one_line(tmp_path, held):

@@ -31,7 +31,7 @@ from arboretum_server.service.context import Context
 from arboretum_server.service.dispatch import Dispatcher
 from arboretum_server.service.handlers import assembly as assembly_handlers
 from arboretum_server.service.sessions import Sessions
-from factories import make_library
+from factories import make_library, reply_of
 
 
 def placed(*xs: float) -> Assembly:
@@ -50,10 +50,7 @@ def server(tmp_path):
     ctx.close()
 
 
-def ok(d: Dispatcher, req: P.Request):
-    reply = d.run(req)
-    assert isinstance(reply, req.REPLY), reply
-    return reply
+ok = reply_of
 
 
 def err(d: Dispatcher, req: P.Request, code: str, match: str) -> P.Error:
