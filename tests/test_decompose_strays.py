@@ -82,3 +82,14 @@ def test_a_large_cloud_takes_the_cell_search(tree, monkeypatch):
     out = preprocess.strays(np.vstack([big, stray]))
     assert called == [1] and np.flatnonzero(out).tolist() == [len(big)]
 
+
+
+def test_a_cloud_too_wide_for_cell_keys_is_looked_up_whole():
+    from scipy.spatial import cKDTree
+
+    from arboretum_server.decompose.preprocess import _apart
+
+    rng = np.random.default_rng(5)
+    cloud = np.vstack([rng.normal(0, 1e-3, (3000, 3)), [[1e11, 1e11, 0.0]], rng.normal(0, 1e-3, (3000, 3)) + [0, 0, 0.01]])
+    exact = cKDTree(cloud).query(cloud, 5)[0][:, -1] > 0.001
+    assert np.array_equal(_apart(cloud, 0.001, 5), exact) and exact[3000]

@@ -246,6 +246,9 @@ def _apart(pts: np.ndarray, far: float, k: int) -> np.ndarray:
 
     if far <= 0:
         return np.zeros(len(pts), bool)
+    cells = np.floor(np.ptp(pts, axis=0) / (far / np.sqrt(3.0))) + 5
+    if float(np.prod(cells)) > 2.0 ** 62:  # a cloud far wider than tall: no cell key fits, look up all
+        return cKDTree(pts).query(pts, k)[0][:, -1] > far
     ijk = np.floor((pts - pts.min(axis=0)) / (far / np.sqrt(3.0))).astype(np.int64) + 2
     dims = ijk.max(axis=0) + 3
     key = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
