@@ -8,9 +8,10 @@ reading while one writer commits. Write transactions are ``BEGIN IMMEDIATE`` ...
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sqlite3
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -163,6 +164,20 @@ def damaged(path: Path, exc: sqlite3.DatabaseError) -> StoreError:
     if primary in _NOT_DAMAGE or (not name and "locked" in str(exc)):
         return StoreError(f"{path}: the catalog cannot be used right now ({exc})")
     return CatalogDamaged(path, f"is damaged ({exc})")
+
+
+def write(con: sqlite3.Connection, change: Callable[[sqlite3.Connection], object]) -> None:
+    """``change(con)`` in one write transaction (``BEGIN IMMEDIATE``), rolled back when it fails (a
+    COMMIT failing on a full disk too, which SQLite may leave open: the next write could not begin)."""
+    con.execute("BEGIN IMMEDIATE")
+    try:
+        change(con)
+        con.execute("COMMIT")
+    except BaseException:
+        if con.in_transaction:
+            with contextlib.suppress(sqlite3.Error):
+                con.execute("ROLLBACK")
+        raise
 
 
 def upsert(con: sqlite3.Connection, e: Entry) -> None:

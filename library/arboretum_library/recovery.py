@@ -96,24 +96,13 @@ def take_back(con: sqlite3.Connection, root: Path, ids: list[str], staged: list[
     are removed only if a COMMIT that reported an error went through after all)."""
     try:
         if any(catalog.get(con, id_) is not None for id_ in ids):
-            _transaction(con)
-            try:
-                catalog.remove(con, ids)
-                con.execute("COMMIT")
-            finally:
-                if con.in_transaction:
-                    con.execute("ROLLBACK")
+            catalog.write(con, lambda c: catalog.remove(c, ids))
         for path in [root / "examples" / id_ for id_ in ids] + staged:
             if path.exists():
                 shutil.rmtree(path)
     except (OSError, sqlite3.Error):
         return False
     return True
-
-
-def _transaction(con: sqlite3.Connection):
-    con.execute("BEGIN IMMEDIATE")
-    return con
 
 
 def _index_folder(con: sqlite3.Connection, folder: Path, report: Recovery) -> bool:
@@ -124,9 +113,7 @@ def _index_folder(con: sqlite3.Connection, folder: Path, report: Recovery) -> bo
         return False
     if entry.id != folder.name:
         return False
-    _transaction(con)
-    catalog.upsert(con, entry)
-    con.execute("COMMIT")
+    catalog.write(con, lambda c: catalog.upsert(c, entry))
     report.reindexed.append(entry.id)
     return True
 
@@ -136,9 +123,7 @@ def _finish(con: sqlite3.Connection, root: Path, journal: dict, report: Recovery
     id_, op = journal.get("id"), journal.get("op")
     if op == "add_group" and isinstance(journal.get("ids"), list):
         ids = [one for one in journal["ids"] if isinstance(one, str) and valid_id(one)]
-        _transaction(con)  # roll the whole group back: its rows in one go (readers see all or none)
-        catalog.remove(con, ids)
-        con.execute("COMMIT")
+        catalog.write(con, lambda c: catalog.remove(c, ids))  # the whole group's rows in one go: all or none
         for one in ids:
             if (root / "examples" / one).exists():
                 shutil.rmtree(root / "examples" / one)
@@ -147,9 +132,7 @@ def _finish(con: sqlite3.Connection, root: Path, journal: dict, report: Recovery
         return
     target = root / "examples" / id_
     if op == "delete":
-        _transaction(con)
-        catalog.remove(con, [id_])
-        con.execute("COMMIT")
+        catalog.write(con, lambda c: catalog.remove(c, [id_]))
         if target.exists():
             shutil.rmtree(target)
         return
@@ -160,9 +143,7 @@ def _finish(con: sqlite3.Connection, root: Path, journal: dict, report: Recovery
         if not _index_folder(con, target, report):
             _quarantine(con, root, target, report)
     elif catalog.get(con, id_) is not None:
-        _transaction(con)
-        catalog.remove(con, [id_])
-        con.execute("COMMIT")
+        catalog.write(con, lambda c: catalog.remove(c, [id_]))
         report.dropped.append(id_)
 
 
@@ -171,9 +152,7 @@ def _quarantine(con: sqlite3.Connection, root: Path, path: Path, report: Recover
     qdir.mkdir(exist_ok=True)
     name = quarantine_name(path.name, secrets.token_hex(4))
     os.rename(path, qdir / name)
-    _transaction(con)
-    catalog.remove(con, [path.name])
-    con.execute("COMMIT")
+    catalog.write(con, lambda c: catalog.remove(c, [path.name]))
     report.quarantined.append(name)
 
 
@@ -213,9 +192,7 @@ def reconcile(con: sqlite3.Connection, root: Path, full: bool) -> Recovery:
                 _quarantine(con, root, path, report)
         gone = sorted(rows - on_disk.keys())
         if gone:
-            _transaction(con)
-            catalog.remove(con, gone)
-            con.execute("COMMIT")
+            catalog.write(con, lambda c: catalog.remove(c, gone))
             report.dropped.extend(gone)
     return report
 

@@ -9,7 +9,6 @@ rebuilds: it gets ``CatalogDamaged``; a writer's reads rebuild once (taking the 
 
 from __future__ import annotations
 
-import contextlib
 import os
 import sqlite3
 from collections.abc import Callable
@@ -83,18 +82,8 @@ class CatalogLink:
             raise self.damaged(exc) from None
 
     def commit(self, change: Callable[[sqlite3.Connection], object]) -> None:
-        """``change(con)`` in one write transaction (``BEGIN IMMEDIATE``), rolled back when it fails (a
-        COMMIT failing on a full disk too, which SQLite may leave open: the next write could not begin)."""
-        con = self.con
-        con.execute("BEGIN IMMEDIATE")
-        try:
-            change(con)
-            con.execute("COMMIT")
-        except BaseException:
-            if con.in_transaction:
-                with contextlib.suppress(sqlite3.Error):
-                    con.execute("ROLLBACK")
-            raise
+        """``change(con)`` in one write transaction, rolled back when it fails (``catalog.write``)."""
+        catalog.write(self.con, change)
 
     def damaged(self, exc: sqlite3.DatabaseError) -> StoreError:
         """The user-facing error for ``exc`` (see ``catalog.damaged``); a damaged file is reconnected to
