@@ -6,7 +6,7 @@ that its height is 0.8 m. The pipeline always computes in that frame and scales 
 
 Every value is checked when the options are made (``WHOLE_LIMITS``, ``REAL_LIMITS``): a Python caller,
 the service (``refine.open``, ``library.import``) and the command line all get one ``InputError`` naming
-the option, e.g. ``decomposition option n_lobes: must be a whole number >= 1, got 1.5``. Limits that
+the option, e.g. ``decomposition option k: must be a whole number >= 2 and <= 100, got 0``. Limits that
 depend on the cloud (lobes per point, main branches per candidate path) are checked while decomposing.
 """
 
