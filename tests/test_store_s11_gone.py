@@ -20,7 +20,7 @@ from arboretum_library.store import Library
 from arboretum_server.service.context import Context
 from arboretum_server.service.dispatch import Dispatcher
 from arboretum_server.service.sessions import Sessions
-from factories import make_example
+from factories import dispatcher, make_example
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 N = 3
@@ -37,9 +37,8 @@ def lib_path(tmp_path) -> Path:
 
 @pytest.fixture
 def server(tmp_path, lib_path):
-    ctx = Context(Sessions(tmp_path / "state"), lib_path)
-    yield Dispatcher(ctx)
-    ctx.close()
+    with dispatcher(tmp_path / "state", lib_path) as d:
+        yield d
 
 
 def error(d: Dispatcher, req) -> P.Error:

@@ -17,6 +17,19 @@ def check_seed(seed: int, what: str = "--seed") -> None:
         raise InputError(f"{what} must not be negative, got {seed}")
 
 
+def check_height(height: float, keep_units: bool) -> None:
+    """``InputError`` for a ``--height`` that is not finite, not above 0 (0 allowed when ``keep_units``:
+    it keeps the scan's units) or beyond ``pointio.MAX_COORDINATE`` (the decomposition options' limit)."""
+    from .pointio import MAX_COORDINATE
+
+    if keep_units and not (math.isfinite(height) and height >= 0):
+        raise InputError(f"--height must be a finite number >= 0 (0: keep the scan's units), got {height}")
+    if not keep_units and not (math.isfinite(height) and height > 0):
+        raise InputError(f"--height must be a finite number > 0, got {height}")
+    if height > MAX_COORDINATE:
+        raise InputError(f"--height must be at most {MAX_COORDINATE:g} (metres), got {height:g}")
+
+
 def check_input_file(path: str, what: str) -> Path:
     """``path`` as a Path when it names an existing file; ``InputError`` naming ``what`` otherwise."""
     p = Path(path)

@@ -172,6 +172,11 @@ class LibraryImported(Reply):
                                                  "a species not in Table 2; refine.commit: not the counts)")
 
 
+ALREADY_COMMITTED = "was committed already"
+"""Words of the note by which ``refine.commit`` says it stored nothing (the draft is unchanged since its
+last commit); the client's status line looks for them."""
+
+
 @message("library.import", LibraryImported, long=True)
 class LibraryImport(Request):
     """Decompose a scan (VRTree 3.4) and add one example per main branch to the library."""

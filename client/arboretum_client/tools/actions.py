@@ -18,7 +18,7 @@ from arboretum_library.assembly import Assembly
 from arboretum_library.atomic import write_atomic
 from arboretum_library.codec import load_record, save_record
 from arboretum_library.errors import InputError
-from arboretum_library.protocol import Edit, RefineState, SessionAssembly
+from arboretum_library.protocol import ALREADY_COMMITTED, Edit, RefineState, SessionAssembly
 
 from .state import REFINEMENT, ClientState
 
@@ -33,7 +33,7 @@ def describe_error(exc: BaseException) -> str:
 def committed(ids: list[str], notes: tuple[str, ...]) -> str:
     """The status line after ``refine_commit``: the ids stored and the server's notes (a repeated commit
     of an unchanged draft stored nothing: its note says so instead of 'stored')."""
-    repeat = [n for n in notes if "committed already" in n]
+    repeat = [n for n in notes if ALREADY_COMMITTED in n]
     head = repeat[0] if repeat else f"stored {', '.join(ids)}"
     return "; ".join([head, *(n for n in notes if n not in repeat)])
 

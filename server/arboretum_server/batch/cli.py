@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import argparse
 
-from arboretum_library.checks import check_seed
+from arboretum_library.checks import check_height, check_seed
 from arboretum_library.cli import add_json_flag, emit
 
 
@@ -47,7 +47,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 def check_args(args: argparse.Namespace) -> str:
     """InputError naming the option for a bad argument, before any scan is read or worker started (the
     checks of ``arboretum decompose``). Returns the report folder."""
-    import math
     from pathlib import Path
 
     from arboretum_library.errors import InputError
@@ -56,12 +55,7 @@ def check_args(args: argparse.Namespace) -> str:
 
     if args.points < 0:
         raise InputError(f"--points must not be negative (0: all), got {args.points}")
-    if not (math.isfinite(args.height) and args.height > 0):
-        raise InputError(f"--height must be a finite number > 0, got {args.height}")
-    from arboretum_library.pointio import MAX_COORDINATE
-
-    if args.height > MAX_COORDINATE:  # DecomposeOptions' limit, named by the flag (not once per scan)
-        raise InputError(f"--height must be at most {MAX_COORDINATE:g} (metres), got {args.height:g}")
+    check_height(args.height, keep_units=False)
     check_seed(args.seed)
     check_points(DecomposeOptions(points=args.points), "--points")
     folder = args.report or f"{str(Path(args.library)).rstrip('/')}-report"

@@ -11,15 +11,14 @@ small --main and --lobes (at most a tenth of the points): ``--min-points 100 --m
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import shutil
 import time
 from contextlib import contextmanager
 
-from arboretum_library.checks import check_seed
+from arboretum_library.checks import check_height, check_seed
 from arboretum_library.cli import add_json_flag, counted, emit, tell
-from arboretum_library.pointio import MAX_COORDINATE, UP_CHOICES
+from arboretum_library.pointio import UP_CHOICES
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -58,10 +57,7 @@ def _options(args: argparse.Namespace):
             raise InputError(f"--{name} must be at least 1, got {v}")
     if args.points < 0:
         raise InputError(f"--points must not be negative (0: all), got {args.points}")
-    if not (math.isfinite(args.height) and args.height >= 0):
-        raise InputError(f"--height must be a finite number >= 0 (0: keep the scan's units), got {args.height}")
-    if args.height > MAX_COORDINATE:  # DecomposeOptions' limit, named by the flag
-        raise InputError(f"--height must be at most {MAX_COORDINATE:g} (metres), got {args.height:g}")
+    check_height(args.height, keep_units=True)
     check_seed(args.seed)
     floor = _min_points_floor()
     if args.min_points is not None and args.min_points < floor:

@@ -1,8 +1,9 @@
-"""Preprocessing (VRTree Appendix A): validate, merge repeated points, remove the ground, downsample, find
-the trunk base, scale.
+"""Preprocessing (VRTree Appendix A): validate, merge repeated points, remove the ground, downsample, leave
+out stray points, find the trunk base, scale.
 
 The paper downsamples every tree to 12,000 points and scales it to 0.8 m. We also merge exact duplicates
-first (``distinct_rows``: merged scans repeat points, scanners write no-return rows as (0, 0, 0)), find
+first (``distinct_rows``: merged scans repeat points, scanners write no-return rows as (0, 0, 0)), leave
+out points standing apart after downsampling (``strays``: one under the tree would be its base), find
 the root (the trunk base: ``trunkbase.find_root``), remove a ground disc when one is present, and refuse
 clouds that hold no single tree.
 Normalised frame: ``p_work = (p_scan - root) * scale`` with the root at the origin and height 0.8 m.
@@ -47,6 +48,8 @@ STRAY_NEIGHBOURS = 4
 """Groups of at most this many points standing apart count as strays (a noisy return, a bird)."""
 STRAY_SPACING = 10.0
 """How many times the cloud's median neighbour distance a stray must stand apart, at least."""
+STRAY_EXACT = 50_000
+"""Up to this many points ``strays`` looks up every point's neighbours (and applies ``STRAY_SPACING``)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -182,7 +185,8 @@ def prepare(
     rng: np.random.Generator,
     labels: np.ndarray | None = None,
 ) -> Prepared:
-    """Validate, remove ground, downsample to ``options.points`` and normalise. InputError on bad input."""
+    """Validate, merge repeated points, remove ground, downsample to ``options.points``, leave out strays
+    and normalise. InputError on bad input."""
     check_points(options)
     pts = validate(points, options)
     keep, repeats = _usable(pts, options)
@@ -232,9 +236,6 @@ def strays(pts: np.ndarray) -> np.ndarray:
         out = _apart(pts, far, k)
     return out if out.sum() <= 0.01 * len(pts) else np.zeros(len(pts), bool)  # a sparse cloud, not strays
 
-
-STRAY_EXACT = 50_000
-"""Up to this many points ``strays`` looks up every point's neighbours."""
 
 
 def _apart(pts: np.ndarray, far: float, k: int) -> np.ndarray:
@@ -291,7 +292,8 @@ def far_pile(pts: np.ndarray, keep: np.ndarray, repeats: Repeats) -> Repeats:
         return repeats
     apart = float(np.sqrt(((others - np.asarray(repeats.at)) ** 2).sum(axis=1).min()))
     out = apart > PILE_APART * float(np.ptp(others[:, 2]))
-    keep[pile] = not out
+    if out:
+        keep[pile] = False
     return repeats._replace(apart=apart, left_out=bool(out))
 
 

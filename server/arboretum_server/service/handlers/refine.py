@@ -157,7 +157,7 @@ def commit(ctx: Context, req: P.RefineCommit):
         if d.committed is not None and d.committed[0] is dec and _unchanged(lib, d.committed[1]):
             ids = tuple(d.committed[1])
             return P.LibraryImported(ids=ids, stats=stats, notes=said + (
-                f"this draft was committed already, unchanged since, as {_span(ids)}: not stored again",))
+                f"this draft {P.ALREADY_COMMITTED}, unchanged since, as {_span(ids)}: not stored again",))
         prov = Provenance(d.name, "", dec.options.species, dec.options.as_dict())
         stem = "".join(c if c.isalnum() or c in "-_" else "-" for c in d.name)[:60] or "scan"
         made = make_examples(dec.hbl, prov)
