@@ -281,3 +281,16 @@ def test_a_negative_or_nan_wait_is_one_line_before_the_lock(tmp_path, held, caps
     assert rc == 2 and took < 1 and err == [f"arboretum keys: error: --wait {value}: give the seconds to wait for "
                                             "another run, 0 or more (0: do not wait)"]
     assert not (tmp_path / "k" / "server.key").exists()
+
+
+def test_accepted_key_names_the_public_key_a_server_checks_a_secret_by(tmp_path):
+    from arboretum_library.remote import accepted_key
+
+    k = tmp_path / "k"
+    generate(k, "alice")
+    assert accepted_key(k / "alice.key_secret") == k / "clients" / "alice.key"
+    assert accepted_key(k / "server.key_secret") is None  # the server's own pair
+    (k / ".alice.key_secret.new").write_text("")
+    assert accepted_key(k / ".alice.key_secret.new") is None  # not a *.key_secret
+    (k / "clients" / "alice.key").unlink()  # revoked
+    assert accepted_key(k / "alice.key_secret") is None

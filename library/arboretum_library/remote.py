@@ -232,13 +232,24 @@ def client_keys(curve: str | os.PathLike, name: str | None = None) -> tuple[byte
     return server_pub, pub, sec
 
 
-def _check_accepted(folder: Path, secret: Path, pub: bytes) -> None:
-    """``InputError`` naming both files when ``folder/clients/NAME.key`` exists for the secret
-    ``NAME.key_secret`` and is not its public half ``pub``: the server would refuse it, seen as a timeout."""
+def accepted_key(secret: Path) -> Path | None:
+    """``clients/NAME.key`` beside the client secret ``NAME.key_secret``: the public key a server keeping
+    this folder accepts it by. None when ``secret`` is no client secret (the server's, a hidden temporary)
+    or there is no such file (a revoked client, a copy without the server's ``clients/``): nothing to check."""
     name = secret.name.removesuffix(".key_secret")
-    accepted = folder / "clients" / f"{name}.key"
-    if name == secret.name or not accepted.is_file() or load_key(accepted)[0] == pub:
+    public = secret.parent / "clients" / f"{name}.key"
+    if name == secret.name or name == "server" or name.startswith(".") or not public.is_file():
+        return None
+    return public
+
+
+def _check_accepted(folder: Path, secret: Path, pub: bytes) -> None:
+    """``InputError`` naming both files when ``accepted_key(secret)`` is not the public half ``pub`` of
+    the secret: the server would refuse it, seen as a timeout."""
+    accepted = accepted_key(secret)
+    if accepted is None or load_key(accepted)[0] == pub:
         return
+    name = secret.name.removesuffix(".key_secret")
     raise InputError(f"{secret} and {accepted} are not one key pair (a 'keys generate --force' cut short?), so the "
                      f"server would refuse this secret, seen as a timeout; run 'arboretum keys generate {folder} "
                      f"--client {name} --force' and restart the server (or, if the server's clients/{name}.key is "

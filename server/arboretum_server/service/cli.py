@@ -116,17 +116,16 @@ def check_client_pairs(root) -> None:
     ``root`` (given away, deleted) and revoked clients (no ``clients/NAME.key``) cannot be checked: they
     pass."""
     from arboretum_library.errors import InputError
-    from arboretum_library.remote import same_pair
+    from arboretum_library.remote import accepted_key, same_pair
 
     bad: list[str] = []
     for secret in sorted(root.glob("*.key_secret")):
-        name = secret.name.removesuffix(".key_secret")
-        public = root / "clients" / f"{name}.key"
-        if name == "server" or name.startswith(".") or not public.is_file():
+        public = accepted_key(secret)
+        if public is None:
             continue
         try:
             if not same_pair(secret, public):
-                bad.append(name)
+                bad.append(secret.name.removesuffix(".key_secret"))
         except InputError as exc:
             raise InputError(f"--curve {root}: {exc}, so it cannot be checked against {public}") from None
     if bad:
