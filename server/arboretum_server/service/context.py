@@ -10,6 +10,7 @@ from pathlib import Path
 from arboretum_library.errors import InputError, StoreError
 from arboretum_library.model import Example
 from arboretum_library.store import Library
+from arboretum_library.store_lock import LibraryGone, check_present
 from arboretum_server.assembly.recombine import RecombineOptions
 
 from .sessions import Sessions
@@ -42,9 +43,12 @@ class Context:
         (deleted, moved, unmounted): never made anew behind the sessions' backs, which name its examples."""
         if self.library_path is None:
             raise InputError("this server has no example library (start it with --library LIB)")
-        if self._library is not None and not (Path(self.library_path) / "library.json").is_file():
-            raise StoreError(f"library {self.library_path} is gone (deleted while the server ran?); put it "
-                             "back, or restart the server to start a new one")
+        if self._library is not None:
+            try:
+                check_present(Path(self.library_path))
+            except LibraryGone:  # said for the server, whose restart is the way to a new library
+                raise StoreError(f"library {self.library_path} is gone (deleted while the server ran?); put it "
+                                 "back, or restart the server to start a new one") from None
         if self._library is None:
             self._library = Library.open(self.library_path, create=True, lock_timeout=self.lock_timeout)
             r = self._library.recovered
