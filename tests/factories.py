@@ -211,3 +211,27 @@ def reply_of(d, req):
     reply = d.run(req)
     assert isinstance(reply, req.REPLY), reply
     return reply
+
+
+def run_then_kill(script: str, root: Path, delay: float, on_ready=None) -> None:
+    """Run the writer ``script`` (a test file run as a script) on the library ``root`` with tests/ on its
+    path; once it prints 'ready', call ``on_ready()`` (if given), let it write for ``delay`` seconds, then
+    SIGKILL it and wait for it."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    here = str(Path(__file__).resolve().parent)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [here, os.environ.get("PYTHONPATH")]))}
+    proc = subprocess.Popen([sys.executable, script, str(root)], stdout=subprocess.PIPE, env=env)
+    try:
+        assert proc.stdout.readline().strip() == b"ready"
+        if on_ready is not None:
+            on_ready()
+        time.sleep(delay)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        proc.stdout.close()

@@ -8,10 +8,7 @@ from __future__ import annotations
 
 import json
 import os
-import signal
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -46,7 +43,7 @@ if __name__ == "__main__":
 import pytest  # noqa: E402
 
 from arboretum_library.store import Library  # noqa: E402
-from factories import assert_examples_equal, make_example  # noqa: E402
+from factories import assert_examples_equal, make_example, run_then_kill  # noqa: E402
 
 
 def _check_whole(root: Path) -> int:
@@ -66,15 +63,8 @@ def test_sigkilled_writer_leaves_a_whole_library(tmp_path):
     root = tmp_path / "lib"
     delays = np.random.default_rng(7).uniform(0.05, 0.5, 5)
     counts = [0]
-    env = {**os.environ, "PYTHONPATH": str(HERE)}
     for delay in delays:
-        proc = subprocess.Popen([sys.executable, __file__, str(root)], stdout=subprocess.PIPE, env=env)
-        try:
-            assert proc.stdout.readline().strip() == b"ready"
-            time.sleep(delay)
-        finally:
-            proc.send_signal(signal.SIGKILL)
-            proc.wait()
+        run_then_kill(__file__, root, delay)
         counts.append(_check_whole(root))
         assert counts[-1] >= counts[-2], counts
     assert counts[-1] >= 5, counts

@@ -8,9 +8,6 @@ of ``RUN`` examples with fsync on until it is killed.
 
 from __future__ import annotations
 
-import os
-import signal
-import subprocess
 import sys
 import threading
 import time
@@ -46,7 +43,7 @@ if __name__ == "__main__":
     raise SystemExit(0)
 
 from arboretum_library.store import Library  # noqa: E402
-from factories import assert_examples_equal  # noqa: E402
+from factories import assert_examples_equal, run_then_kill  # noqa: E402
 
 
 def _check_whole(root: Path) -> int:
@@ -73,22 +70,12 @@ def _read_counts(root: Path, stop: threading.Event, seen: list[int]) -> None:
 
 def test_runs_are_seen_whole_while_written_and_after_the_writer_is_killed(tmp_path):
     root = tmp_path / "lib"
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(HERE), os.environ.get("PYTHONPATH")]))}
     stop, seen = threading.Event(), []
     reader = threading.Thread(target=_read_counts, args=(root, stop, seen))
     counts = [0]
     try:
         for i, delay in enumerate(np.random.default_rng(11).uniform(0.2, 0.6, 4)):
-            proc = subprocess.Popen([sys.executable, __file__, str(root)], stdout=subprocess.PIPE, env=env)
-            try:
-                assert proc.stdout.readline().strip() == b"ready"
-                if i == 0:
-                    reader.start()
-                time.sleep(delay)
-            finally:
-                proc.send_signal(signal.SIGKILL)
-                proc.wait()
-                proc.stdout.close()
+            run_then_kill(__file__, root, delay, reader.start if i == 0 else None)
             counts.append(_check_whole(root))
             assert counts[-1] >= counts[-2], counts
     finally:
