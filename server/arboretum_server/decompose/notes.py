@@ -45,7 +45,9 @@ def result_notes(options: DecomposeOptions, stats: dict) -> list[str]:
 def scan_notes(stats: dict) -> list[str]:
     """Notes on the cloud itself (repeated points, all foliage, a straight line, trunk-like columns away
     from the root), which refinement does not change. A figure missing from ``stats`` gives no note."""
-    out = [n for n in [repeated_note(stats.get("repeated"))] if n]
+    out = []
+    if repeated := repeated_note(stats.get("repeated")):
+        out.append(repeated)
     if stats.get("strays"):
         n = stats["strays"]
         out.append(f"{n} stray point{'s' if n > 1 else ''} left out: each stands over a tenth of the tree's height "
