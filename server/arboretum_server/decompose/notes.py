@@ -50,9 +50,9 @@ def scan_notes(stats: dict) -> list[str]:
         out.append(repeated)
     if stats.get("strays"):
         n = stats["strays"]
-        out.append(f"{n} stray point{'s' if n > 1 else ''} left out: each stands over a tenth of the tree's height "
-                   "from its 4 nearest other points (scanner noise, a bird?), and would have set the trunk base "
-                   "or the height")
+        out.append(f"{n} stray point{'s' if n > 1 else ''} left out: alone, or in small groups below or above "
+                   "the tree, over a tenth of its height from the rest of the cloud (scanner noise, a bird?); "
+                   "they would have set the trunk base or the height")
     leaf = stats.get("leaf_points", 0) / max(stats.get("points", 0), 1)
     if leaf >= ALL_LEAF:
         out.append(f"{leaf:.1%} of the points are foliage ({stats['labels']} labels) and almost none wood: the "

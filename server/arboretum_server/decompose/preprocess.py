@@ -21,6 +21,7 @@ from arboretum_library.repeats import Repeats, distinct_rows
 
 from .columns import Column, trunk_columns
 from .options import WORK_HEIGHT, DecomposeOptions
+from .strays import strays
 from .trunkbase import find_root, plan_radius
 
 GROUND_CELL = 0.02
@@ -40,18 +41,6 @@ PILE_APART = 0.25
 """The most repeated point is left out when every other point lies farther from it than this fraction of
 their height: a scanner's no-return rows (0, 0, 0), far from a tree in a georeferenced frame, would
 otherwise set the trunk base or the height as a lone point (below the tree: the root moves onto it)."""
-STRAY_APART = 0.1
-"""A point is a stray when its ``STRAY_NEIGHBOURS``-th nearest neighbour lies farther than this fraction
-of the cloud's height (0.1-99.9 percentile of z), and than ``STRAY_SPACING`` times the median such
-distance (sparse photo clouds): one stray point 10 m under a 24.5 m tree became its trunk base."""
-STRAY_NEIGHBOURS = 4
-"""Groups of at most this many points standing apart count as strays (a noisy return, a bird)."""
-STRAY_SPACING = 10.0
-"""How many times the cloud's median neighbour distance a stray must stand apart, at least."""
-STRAY_EXACT = 50_000
-"""Up to this many points ``strays`` looks up every point's neighbours (and applies ``STRAY_SPACING``)."""
-
-
 @dataclass(frozen=True, eq=False)
 class Prepared:
     """A cloud ready for decomposition, in the normalised frame."""
@@ -213,57 +202,6 @@ def prepare(
         lab = (lab[idx] > 0).astype(np.uint8)
     return Prepared((sub - root) * scale, idx, lab, root, scale, int(ground.sum()), tuple(cols), repeats,
                     int(stray.sum()))
-
-
-def strays(pts: np.ndarray) -> np.ndarray:
-    """(N,) bool: the points of ``pts`` (N, 3) standing apart (``STRAY_APART``): each has fewer than
-    ``STRAY_NEIGHBOURS`` other points within that distance. Few enough points are left for a tree.
-
-    Up to ``STRAY_EXACT`` points, every point's neighbours are looked up (a sparse cloud's spacing sets a
-    floor on the distance). Beyond, the distance is the height's share alone (such clouds are dense) and
-    only points in sparse cells are looked at: 1M points in about 0.3 s instead of 1.5 s."""
-    from scipy.spatial import cKDTree
-
-    k = STRAY_NEIGHBOURS + 1
-    if len(pts) <= 10 * k:
-        return np.zeros(len(pts), bool)
-    lo, hi = np.percentile(pts[:, 2], [0.1, 99.9])
-    far = STRAY_APART * float(hi - lo)
-    if len(pts) <= STRAY_EXACT:
-        d, _ = cKDTree(pts).query(pts, k)
-        out = d[:, -1] > max(far, STRAY_SPACING * float(np.median(d[:, -1])))
-    else:
-        out = _apart(pts, far, k)
-    return out if out.sum() <= 0.01 * len(pts) else np.zeros(len(pts), bool)  # a sparse cloud, not strays
-
-
-
-def _apart(pts: np.ndarray, far: float, k: int) -> np.ndarray:
-    """(N,) bool: points of ``pts`` (N, 3) with fewer than ``k`` points (themselves included) within ``far``.
-
-    Cells of side far / sqrt(3) hold points all within ``far`` of each other, so only points in cells of
-    fewer than ``k`` can qualify; they are counted against the points of the cells up to two away."""
-    from scipy.spatial import cKDTree
-
-    if far <= 0:
-        return np.zeros(len(pts), bool)
-    cells = np.floor(np.ptp(pts, axis=0) / (far / np.sqrt(3.0))) + 5
-    if float(np.prod(cells)) > 2.0 ** 62:  # a cloud far wider than tall: no cell key fits, look up all
-        return cKDTree(pts).query(pts, k)[0][:, -1] > far
-    ijk = np.floor((pts - pts.min(axis=0)) / (far / np.sqrt(3.0))).astype(np.int64) + 2
-    dims = ijk.max(axis=0) + 3
-    key = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
-    _, inverse, count = np.unique(key, return_inverse=True, return_counts=True)
-    cand = np.flatnonzero(count[inverse] < k)
-    out = np.zeros(len(pts), bool)
-    if not len(cand):
-        return out
-    step = np.arange(-2, 3)
-    offsets = ((step[:, None, None] * dims[1] + step[None, :, None]) * dims[2] + step[None, None, :]).ravel()
-    near = np.isin(key, np.unique(key[cand][:, None] + offsets[None, :]))
-    counts = cKDTree(pts[near]).query_ball_point(pts[cand], far, return_length=True)
-    out[cand] = counts < k
-    return out
 
 
 def _usable(pts: np.ndarray, options: DecomposeOptions) -> tuple[np.ndarray, Repeats]:
