@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import shutil
 import sqlite3
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -162,8 +163,27 @@ def damaged(path: Path, exc: sqlite3.DatabaseError) -> StoreError:
     name = getattr(exc, "sqlite_errorname", "")
     primary = "_".join(name.split("_")[:2])  # SQLITE_IOERR_WRITE (a full disk, a file-size limit) is an I/O error
     if primary in _NOT_DAMAGE or (not name and "locked" in str(exc)):
+        free = free_bytes(path.parent) if primary in _SPACE else None
+        if free is not None and free < LOW_SPACE:
+            return StoreError(f"{path}: the catalog cannot be used: the disk holding it is full ({free:,} bytes "
+                              f"free; SQLite says \"{exc}\"); free some space and try again")
         return StoreError(f"{path}: the catalog cannot be used right now ({exc})")
     return CatalogDamaged(path, f"is damaged ({exc})")
+
+
+_SPACE = {"SQLITE_IOERR", "SQLITE_CANTOPEN", "SQLITE_FULL"}
+"""SQLite's words for what a full disk does: it cannot write (FULL, IOERR_WRITE), or cannot create the
+``-shm`` file that WAL mode needs even to read (IOERR_SHMSIZE on a disk with 0 bytes free)."""
+LOW_SPACE = 1 << 20
+"""Below this many free bytes, such an error is put down to a full disk (an -shm file takes 32 KiB)."""
+
+
+def free_bytes(folder: Path) -> int | None:
+    """Free bytes on the disk holding ``folder`` (None when that cannot be asked)."""
+    try:
+        return int(shutil.disk_usage(folder).free)
+    except OSError:
+        return None
 
 
 def write(con: sqlite3.Connection, change: Callable[[sqlite3.Connection], object]) -> None:
