@@ -64,25 +64,21 @@ def groups(pts: np.ndarray, far: float) -> np.ndarray:
     """(N,) bool: points of ``pts`` (N, 3) in small pieces apart from the tree, below or above it (module doc).
 
     The pieces are the connected sets of occupied cells of side ``far`` / 2 (26 neighbours): points closer
-    than ``far`` / 2 always share a piece, points farther than ``far`` x sqrt(3) apart never link. Cell
-    coordinates are compressed per axis (gaps of two cells or more become two), so a stray 10^6 heights
-    away costs nothing."""
+    than ``far`` / 2 always share a piece, points farther than ``far`` x sqrt(3) apart never link. When the
+    cells' span is too wide for one 64-bit key (a stray 10^6 heights away), ``_packed`` closes the gaps."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
     out = np.zeros(len(pts), bool)
     if far <= 0 or not np.isfinite(far):
         return out
-    ijk = np.floor((pts - pts.min(axis=0)) / (far / 2.0)).astype(np.int64)
-    cols = []
-    for a in range(3):
-        u, inv = np.unique(ijk[:, a], return_inverse=True)
-        packed = np.r_[1, 1 + np.cumsum(np.minimum(np.diff(u), 2))]  # from 1: a neighbour of 0 exists
-        cols.append(packed[inv.reshape(-1)])
-    c = np.stack(cols, axis=1)
+    c = np.floor((pts - pts.min(axis=0)) / (far / 2.0)).astype(np.int64) + 1  # from 1: cell 0 is a neighbour
     dims = c.max(axis=0) + 2
-    if float(np.prod(dims.astype(np.float64))) > 2.0 ** 62:  # no cell key fits (never for a tree)
-        return out
+    if float(np.prod(dims.astype(np.float64))) > 2.0 ** 62:  # a stray very far away: close the gaps
+        c = np.stack([_packed(c[:, a]) for a in range(3)], axis=1)
+        dims = c.max(axis=0) + 2
+        if float(np.prod(dims.astype(np.float64))) > 2.0 ** 62:  # no cell key fits (never for a tree)
+            return out
     key = (c[:, 0] * dims[1] + c[:, 1]) * dims[2] + c[:, 2]
     cells, inverse, count = np.unique(key, return_inverse=True, return_counts=True)
     rows, nbrs = [], []
@@ -110,6 +106,13 @@ def groups(pts: np.ndarray, far: float) -> np.ndarray:
     # neither the trunk base nor the height
     outside = (high < low[tree]) | (low > high[tree])
     return ((size < STRAY_GROUP * len(pts)) & outside)[of]
+
+
+def _packed(cells: np.ndarray) -> np.ndarray:
+    """Cell coordinates (N,) along one axis renumbered from 1 with every gap of two cells or more made
+    two: neighbours stay neighbours, and the span is at most twice the number of occupied cells."""
+    u, inv = np.unique(cells, return_inverse=True)
+    return np.r_[1, 1 + np.cumsum(np.minimum(np.diff(u), 2))][inv.reshape(-1)]
 
 
 def _apart(pts: np.ndarray, far: float, k: int) -> np.ndarray:
