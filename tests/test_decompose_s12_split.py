@@ -1,0 +1,73 @@
+"""``refine.split_lobe`` follows the strokes (helper-92's hunt, session 12). Each stroke seeded one
+k-means centre (its mean) and k-means ran to convergence, so a stroke over a lobe's top tenth (25 of
+its 247 points on scan 01) got 113 of them, and strokes 100 m away or over another lobe split it all the
+same. Now up to 64 samples of each stroke seed a centre each (VRTree: "sampled points from these strokes
+serving as initial clustering centers"), and a stroke far from the lobe, repeating another or keeping no
+point is refused."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from arboretum_library.assets import sample_scans
+from arboretum_library.errors import InputError
+from arboretum_library.pointio import read_points
+from arboretum_server.decompose import refine
+from arboretum_server.decompose.options import DecomposeOptions
+from arboretum_server.decompose.pipeline import decompose
+
+
+@pytest.fixture(scope="module")
+def d():
+    return decompose(read_points(sample_scans()[0]).points, DecomposeOptions())
+
+
+def _lobe(d, j):
+    return d.to_output(d.points[d.lobes[j].members])
+
+
+@pytest.mark.parametrize("j", [5, 12, 30])
+def test_a_stroke_over_the_tip_keeps_the_tip(d, j):
+    out = _lobe(d, j)
+    top = out[:, 2] >= np.quantile(out[:, 2], 0.9)
+    r = refine.split_lobe(d, j, [out[top], out[~top]])
+    tip, rest = (len(lb.members) for lb in r.lobes[-2:])
+    assert tip + rest == len(out) and abs(tip - top.sum()) <= max(3, 0.02 * len(out)), (tip, int(top.sum()))
+
+
+def test_a_line_across_a_lobe_splits_it_where_drawn(d):
+    """Two short strokes at either end of the lobe's long axis: the cut falls near the middle between
+    them, on the points' own side of it."""
+    out = _lobe(d, 5)
+    c = out.mean(axis=0)
+    axis = np.linalg.svd(out - c, full_matrices=False)[2][0]
+    t = (out - c) @ axis
+    strokes = [c + np.outer(np.linspace(t.min(), 0.6 * t.min(), 5), axis), c + np.outer(np.linspace(0.6 * t.max(), t.max(), 5), axis)]
+    r = refine.split_lobe(d, 5, strokes)
+    a, b = (d.to_output(d.points[lb.members]) for lb in r.lobes[-2:])
+    ta, tb = (a - c) @ axis, (b - c) @ axis
+    assert ta.max() < tb.min() + 0.2 * np.ptp(t)  # the parts lie on either side of one cut, give or take
+    assert np.median(ta) < 0 < np.median(tb)
+
+
+@pytest.mark.parametrize("where, words", [("far", r"passes 100 m from"), ("other lobe", r"passes 0\.2\d+ m from")])
+def test_a_stroke_off_the_lobe_is_refused(d, where, words):
+    out = _lobe(d, 5)
+    strokes = [out[:1], out[:1] + [100.0, 0.0, 0.0]] if where == "far" else [out[:1], _lobe(d, 20)[:1]]
+    with pytest.raises(InputError, match=f"stroke 1 {words} lobe 5's points at its nearest \\(the lobe is 0.12"):
+        refine.split_lobe(d, 5, strokes)
+
+
+def test_a_stroke_repeating_another_is_refused(d):
+    out = _lobe(d, 5)
+    with pytest.raises(InputError, match="stroke 1 only repeats the points of earlier strokes"):
+        refine.split_lobe(d, 5, [out[:3], out[:3]])
+
+
+def test_a_stroke_that_keeps_no_point_is_refused(d, monkeypatch):
+    monkeypatch.setattr(refine, "SEEDS_PER_STROKE", 10_000)
+    out = _lobe(d, 12)
+    beside = out[np.argmax(out[:, 0])] + [0.01 * np.ptp(out[:, 0]), 0.0, 0.0]  # just off the lobe's edge
+    with pytest.raises(InputError, match="stroke 1 keeps no point of lobe 12"):
+        refine.split_lobe(d, 12, [out, beside[None]])
