@@ -170,7 +170,7 @@ def test_refinement_flow(server):
     s = ok(server, P.RefineOpen(session=sid, points=pts, labels=labels, name="toy", options=opts))
     assert len(s.hbl.lobes) == 6 and not s.can_undo
     cloud = ok(server, P.RefinePoints(session=sid))
-    assert cloud.points.dtype == np.float32 and len(cloud.points) == len(cloud.lobe_of) == len(s.hbl.points)
+    assert cloud.points.dtype == np.float64 and len(cloud.points) == len(cloud.lobe_of) == len(s.hbl.points)
     assert len(ok(server, P.RemoveLobe(session=sid, lobe=0)).hbl.lobes) == 5
     assert len(ok(server, P.MergeLobes(session=sid, lobes=(0, 1))).hbl.lobes) == 4
     members = np.flatnonzero(ok(server, P.RefinePoints(session=sid)).lobe_of == 0)

@@ -42,11 +42,8 @@ class RefineDraft:
     species: str = "unknown"
     revision: int = 0
     generation: str = ""
-    """Token of the saved source this draft journals its edits under (``refine_store``)."""
-    committed: tuple[Any, dict[str, str]] | None = None
-    """(the state last committed, the id -> revision of each example it was stored as): a second commit
-    of that same state (a double press), while those examples are unchanged, answers their ids instead of
-    storing copies (in memory: not after a restart)."""
+    """Token of the saved source this draft journals its edits under (``refine_store``). A commit of a
+    draft already in the library is found by content in the library itself (``refine.stored_copies``)."""
 
     @property
     def current(self) -> Any:

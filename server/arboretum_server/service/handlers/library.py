@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from arboretum_library import protocol as P
+from arboretum_library.errors import InputError
 from arboretum_server.service.context import Context
 from arboretum_server.service.jobs import Job
 
@@ -44,7 +45,6 @@ def options_from(species: str, options: dict) -> Any:
     """``DecomposeOptions`` from a request's species and option map; one ``InputError`` naming the option
     for an unknown name or a bad value (``DecomposeOptions`` checks every value), or for ``points``
     below ``min_points``. A whole number sent as a float (2.0) counts as that int."""
-    from arboretum_library.errors import InputError
     from arboretum_server.decompose.options import WHOLE_LIMITS, DecomposeOptions
     from arboretum_server.decompose.preprocess import check_points
 
@@ -58,6 +58,18 @@ def options_from(species: str, options: dict) -> Any:
     o = DecomposeOptions(**{"species": species.lower(), **opts})
     check_points(o)  # now, not in the worker
     return o
+
+
+def check_labels(labels: np.ndarray | None, field: str) -> None:
+    """``InputError`` naming ``field`` and the values found when ``labels`` hold anything but WOOD 0 and
+    LEAF 1 (ASPRS classes 2 and 5, say): the decomposition would take every non-zero label for leaf. The
+    words of the CLI's check of a labels column (``pointio_formats.check_labels``)."""
+    if labels is None:
+        return
+    bad = np.setdiff1d(np.unique(labels), [0, 1])
+    if bad.size:
+        shown = ", ".join(str(int(b)) for b in bad[:5]) + (", ..." if bad.size > 5 else "")
+        raise InputError(f"{field}: labels must be 0 (wood) or 1 (leaf); found {shown}")
 
 
 def _int_if_whole(v: Any) -> Any:
@@ -85,6 +97,7 @@ def import_job(progress, library_path: str, points: np.ndarray, labels: np.ndarr
 
 
 def import_scan(ctx: Context, req: P.LibraryImport) -> Job:
+    check_labels(req.labels, "library.import.labels")
     ctx.library()  # fail now, not in the worker, when there is no library
     options_from(req.species, req.options)
     kwargs = {"library_path": str(ctx.library_path), "points": req.points, "labels": req.labels,

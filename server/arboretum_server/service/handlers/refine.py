@@ -7,17 +7,18 @@ request of a session rebuilds its draft in a worker (decompose again, replay the
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from arboretum_library import protocol as P
-from arboretum_library.errors import InputError, StoreError
+from arboretum_library.errors import InputError
 from arboretum_server.service import refine_store
 from arboretum_server.service.context import Context
 from arboretum_server.service.handlers.assembly import checked_strokes
-from arboretum_server.service.handlers.library import options_from
+from arboretum_server.service.handlers.library import check_labels, options_from
 from arboretum_server.service.jobs import Job
 from arboretum_server.service.sessions import RefineDraft, Session
 
@@ -84,6 +85,7 @@ def _with_draft(ctx: Context, session_id: str, then: Callable[[Session, RefineDr
 
 
 def open_scan(ctx: Context, req: P.RefineOpen) -> Job:
+    check_labels(req.labels, "refine.open.labels")
     s = ctx.sessions.get(req.session)
     options_from(req.species, req.options)
 
@@ -101,7 +103,7 @@ def open_scan(ctx: Context, req: P.RefineOpen) -> Job:
 def points(ctx: Context, req: P.RefinePoints) -> P.Reply | Job:
     def then(s: Session, d: RefineDraft) -> P.RefineCloud:
         dec = d.current
-        return P.RefineCloud(points=dec.hbl.points.astype(np.float32), labels=dec.labels, lobe_of=dec.lobe_of)
+        return P.RefineCloud(points=dec.hbl.points, labels=dec.labels, lobe_of=dec.lobe_of)
 
     return _with_draft(ctx, req.session, then)
 
@@ -154,31 +156,41 @@ def commit(ctx: Context, req: P.RefineCommit):
         said = tuple(option_notes(dec.options) + scan_notes(dec.stats))  # the user chose the lobe count
         lib = ctx.library()
         stats = {"lobes": len(dec.lobes)}
-        if d.committed is not None and d.committed[0] is dec and _unchanged(lib, d.committed[1]):
-            ids = tuple(d.committed[1])
+        prov = Provenance(d.name, "", dec.options.species, dec.options.as_dict())
+        made = make_examples(dec.hbl, prov)
+        found = stored_copies(lib, made, prov)
+        if made and all(found):
+            ids = tuple(i for i in found if i)
             return P.LibraryImported(ids=ids, stats=stats, notes=said + (
                 f"this draft {P.ALREADY_COMMITTED}, unchanged since, as {_span(ids)}: not stored again",))
-        prov = Provenance(d.name, "", dec.options.species, dec.options.as_dict())
         stem = "".join(c if c.isalnum() or c in "-_" else "-" for c in d.name)[:60] or "scan"
-        made = make_examples(dec.hbl, prov)
-        bare = sum(not e.structure.lobes for e in made)
         examples = lib.add_new(made, stem)  # ids picked under the lock
-        d.committed = (dec, {e.id: lib.revision(e.id) for e in examples})
+        same = [i for i in found if i]
+        if same:
+            said += (f"{len(same)} of {len(made)} examples are the same as {', '.join(same)} in the library; "
+                     "stored again with the rest (a commit stores the whole tree)",)
+        bare = sum(not e.structure.lobes for e in made)
         if bare:
             said += (f"{bare} of {len(made)} examples have no lobes: "
                      "they grow no twigs or leaves",)
-        return P.LibraryImported(ids=tuple(d.committed[1]), stats=stats, notes=said)
+        return P.LibraryImported(ids=tuple(e.id for e in examples), stats=stats, notes=said)
 
     return _with_draft(ctx, req.session, then)
 
 
-def _unchanged(lib, revisions: dict[str, str]) -> bool:
-    """Whether every example a commit stored is still in ``lib`` as it stored it (an id freed by a delete is
-    given to the next writer of that name: the same id then holds another tree)."""
-    try:
-        return all(lib.revision(i) == r for i, r in revisions.items())
-    except StoreError:  # deleted
-        return False
+def stored_copies(lib: Any, made: list, prov: Any) -> list[str | None]:
+    """For each example of ``made``, the id of one in ``lib`` identical to it, or None.
+
+    Identical: the same arrays (the catalog's ``content_sha256``, the SHA-256 of arrays.npz, which holds
+    no id, time or provenance: the same tree hashes alike under any id and after a restart) and the same
+    source name and species. The lowest such id is given (an earlier server stored copies)."""
+    from arboretum_library.folders import encode
+
+    by_hash: dict[str, str] = {}
+    for e in lib.entries(species=prov.species):  # by id
+        if e.source == prov.source:
+            by_hash.setdefault(e.content_sha256, e.id)
+    return [by_hash.get(json.loads(encode(ex)[0])["arrays_sha256"]) for ex in made]
 
 
 def _span(ids: tuple[str, ...]) -> str:
