@@ -48,6 +48,7 @@ __all__ = [
     "trunk_base",
     "even_sample_indices",
     "median_spacing",
+    "precision_note",
 ]
 
 READERS: dict[str, Callable[[Path], fmt.Raw]] = {
@@ -88,6 +89,14 @@ class PointCloud:
     """Path of the file it was read from ('' when built in memory)."""
     up_axis: str = "z"
     """The up axis of the file as read: 'z' or 'y' (points are Z up either way)."""
+    resolution: float = 0.0
+    """Metres: the largest gap between coordinate values the file's type could hold over the cloud's
+    extent (float32: the spacing at the largest magnitude, 0.5 m at 5.4e6 m; LAS: the largest scale
+    factor; integers: 1 unit), scaled with the cloud; 0.0 for float64, text and clouds built in memory.
+    See ``precision_note``."""
+    stored_as: str = ""
+    """How the file stored the coordinates: 'float32', 'float64', 'text', 'LAS integers scaled by
+    0.001'..., or '' when built in memory."""
 
     def __post_init__(self) -> None:
         pts = frozen_array(self, "points", self.points, np.float64, (None, 3))
@@ -104,6 +113,8 @@ class PointCloud:
             frozen_array(self, "branch_ids", self.branch_ids, np.int32, (n,))
         if self.up_axis not in ("z", "y"):
             raise ValidationError(f"PointCloud.up_axis: must be 'z' or 'y', got {self.up_axis!r}")
+        if not (np.isfinite(self.resolution) and self.resolution >= 0):
+            raise ValidationError(f"PointCloud.resolution: must be a number >= 0, got {self.resolution}")
 
     def __len__(self) -> int:
         return len(self.points)
@@ -172,7 +183,7 @@ def read_points(path: str | Path, options: ReadOptions = ReadOptions()) -> Point
     if options.max_points is not None and len(points) > options.max_points:
         keep = even_sample_indices(points, options.max_points, np.random.default_rng(options.seed))
         points = points[keep]
-    points = _place(path, points, options)
+    points, scale = _place(path, points, options)
     try:
         return PointCloud(
             points=points,
@@ -181,6 +192,8 @@ def read_points(path: str | Path, options: ReadOptions = ReadOptions()) -> Point
             branch_ids=_subset(raw.get("branch_ids"), keep),
             source=str(path),
             up_axis=up,
+            resolution=float(raw.get("resolution", 0.0)) * scale,
+            stored_as=str(raw.get("stored_as", "")),
         )
     except ValidationError as exc:
         raise InputError(f"'{path}': {exc}") from None
@@ -231,20 +244,22 @@ def _checked_points(path: Path, raw: fmt.Raw) -> np.ndarray:
     return points
 
 
-def _place(path: Path, points: np.ndarray, options: ReadOptions) -> np.ndarray:
-    """Recentre on the trunk base and scale to the target height, as ``options`` asks."""
+def _place(path: Path, points: np.ndarray, options: ReadOptions) -> tuple[np.ndarray, float]:
+    """Recentre on the trunk base and scale to the target height, as ``options`` asks; and the scale."""
     if not options.recentre and options.target_height is None:
-        return points
+        return points, 1.0
     base = trunk_base(points)
     if options.recentre:
         points = points - base
         base = np.zeros(3)
+    scale = 1.0
     if options.target_height is not None:
         height = float(np.ptp(points[:, 2]))
         if height <= 0:
             raise InputError(f"'{path}': cannot scale to a height: all points lie at one height")
-        points = base + (points - base) * (options.target_height / height)
-    return points
+        scale = options.target_height / height
+        points = base + (points - base) * scale
+    return points, scale
 
 
 def _subset(values: Any, keep: np.ndarray | None) -> np.ndarray | None:
@@ -296,6 +311,42 @@ def _atomic_write(path: Path, write: Callable[[BinaryIO], None]) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+PRECISION_FRACTION = 0.1
+"""``precision_note`` speaks when the resolution is coarser than this fraction of the point spacing."""
+
+
+def precision_note(cloud: PointCloud, spacing: float | None = None) -> str | None:
+    """One line when the file's coordinate type is too coarse for the scan (``cloud.resolution`` above
+    ``PRECISION_FRACTION`` of the median point spacing, ``median_spacing`` when ``spacing`` is None),
+    else None. Such a cloud is read, not refused: its points sit on the type's grid. A float32 PLY of a
+    1 cm tree at UTM coordinates (5.4e6 m: 0.5 m grid) decomposed into garbage with no word of why.
+    The magnitude named is that of the cloud as held (the file's, unless read with ``recentre``)."""
+    if cloud.resolution <= 0:
+        return None
+    if spacing is None:
+        spacing = median_spacing(cloud.points, np.random.default_rng(0))
+    if cloud.resolution <= PRECISION_FRACTION * spacing:
+        return None
+    magnitude = float(np.abs(column_bounds(cloud.points)).max()) if len(cloud) else 0.0
+    stored = cloud.stored_as or "a coarse type"
+    return (f"'{cloud.source or 'cloud'}': coordinates stored as {stored} at magnitudes up to {magnitude:.3g} m "
+            f"are only {_length(cloud.resolution)} apart, coarser than a tenth of the median point spacing "
+            f"({_length(spacing)}): the points sit on that grid; {_precision_fix(stored)}")
+
+
+def _precision_fix(stored: str) -> str:
+    """What to do about coordinates stored as ``stored``: shifting helps floats only."""
+    if stored.startswith("LAS"):
+        return "re-export it with a finer scale factor, or as float64 PLY"
+    if stored.startswith(("int", "uint")):
+        return "re-export it as float64"
+    return "re-export it as float64, or shifted near the origin"
+
+
+def _length(metres: float) -> str:
+    return f"{metres:.3g} m" if metres >= 0.1 else f"{metres * 1000:.3g} mm"
 
 
 def scan_stats(cloud: PointCloud, seed: int = 0) -> dict[str, Any]:

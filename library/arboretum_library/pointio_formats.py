@@ -1,7 +1,8 @@
 """Per-format readers and writers behind ``pointio.read_points`` / ``pointio.write_points``.
 
 A reader takes a path and returns a ``Raw`` dict: ``points`` (N, 3) float64 (not yet checked for
-finiteness), optional ``colors`` (N, 3) float in [0, 1], ``labels`` (N,) and ``branch_ids`` (N,). Text
+finiteness), optional ``colors`` (N, 3) float in [0, 1], ``labels`` (N,) and ``branch_ids`` (N,), and
+``resolution`` / ``stored_as`` (``coordinate_resolution``; absent for text: exact). Text
 readers refuse NaN/infinite rows themselves, naming the line. A problem with the file raises
 ``InputError`` naming it. Writers take an open binary file and the validated arrays.
 """
@@ -17,13 +18,15 @@ from .errors import InputError
 
 Raw = dict[str, Any]
 
-LABEL_NAMES = ("label", "labels")
-"""Columns holding our labels, 0 (wood) or 1 (leaf)."""
-CLASS_NAMES = ("classification", "class")
+LABEL_NAMES = ("label", "labels", "scalar_label", "scalar_labels")
+"""Columns holding our labels, 0 (wood) or 1 (leaf), first found first. CloudCompare writes a scalar
+field ``Label`` to PLY as ``scalar_Label`` (names are compared in lower case)."""
+CLASS_NAMES = ("classification", "class", "scalar_classification", "scalar_class")
 """Columns holding classes of another scheme (ASPRS LAS classes: 1 unassigned, 2 ground, 5 high
-vegetation...): ignored in every format, as LAS classification is. Read as labels they refused a
-classified CSV (class 5 is no label), and a column of 0 (never classified) and 1 (unassigned) would
-have passed as wood and leaf."""
+vegetation...; PDAL writes ``Classification``, CloudCompare ``scalar_Classification``): ignored in
+every format, as LAS classification is. Read as labels they refused a classified CSV (class 5 is no
+label), and a column of 0 (never classified) and 1 (unassigned) would have passed as wood and leaf.
+Never looked up: listed so that no one adds them to ``LABEL_NAMES``."""
 BRANCH_NAMES = ("branch_id", "branch_ids", "branchid", "branch")
 COLOR_NAMES = (
     ("red", "green", "blue"),
@@ -59,6 +62,7 @@ def from_named(path: Path, columns: dict[str, np.ndarray]) -> Raw:
     if not all(k in cols for k in "xyz"):
         raise fail(path, f"needs x, y and z values, found {sorted(cols)}")
     raw: Raw = {"points": np.stack([np.asarray(cols[k], np.float64) for k in "xyz"], axis=1)}
+    raw["resolution"], raw["stored_as"] = coordinate_resolution([np.asarray(cols[k]) for k in "xyz"])
     for names in COLOR_NAMES:
         if all(n in cols for n in names):
             kind = np.asarray(cols[names[0]]).dtype
@@ -70,9 +74,27 @@ def from_named(path: Path, columns: dict[str, np.ndarray]) -> Raw:
         found = next((n for n in names if n in cols), None)
         if found is not None:
             raw[key] = integer_column(path, found, cols[found])
-    if "labels" in raw:
-        check_labels(path, raw["labels"])
+            if key == "labels":
+                check_labels(path, raw["labels"], found)
     return raw
+
+
+def coordinate_resolution(columns: list[np.ndarray]) -> tuple[float, str]:
+    """The largest gap between neighbouring values the coordinate ``columns`` (x, y, z as stored) can
+    hold over their range, and the name of their type: 0.0 for float64, 1.0 (one unit) for integers,
+    and for float32 the spacing at the largest magnitude (0.5 m at 5.4e6 m, UTM northings; 3.1e-5 m at
+    254 m). A float32 tree at UTM coordinates is read as if snapped to that grid: see
+    ``pointio.precision_note``."""
+    worst = 0.0
+    for col in columns:
+        kind = col.dtype
+        if kind.kind in "iu":
+            worst = max(worst, 1.0)
+        elif kind.kind == "f" and kind.itemsize < 8 and col.size:
+            top = max(abs(float(col.min())), abs(float(col.max())))
+            if np.isfinite(top):  # NaN and infinite points are refused later, naming them
+                worst = max(worst, float(np.spacing(kind.type(top))))
+    return worst, "/".join(sorted({c.dtype.name for c in columns}))
 
 
 def integer_column(path: Path, name: str, values: np.ndarray) -> np.ndarray:
@@ -84,29 +106,73 @@ def integer_column(path: Path, name: str, values: np.ndarray) -> np.ndarray:
     return v.astype(np.int64)
 
 
-def check_labels(path: Path, labels: np.ndarray) -> None:
+def check_labels(path: Path, labels: np.ndarray, name: str = "label") -> None:
+    """InputError unless every label in column ``name`` is 0 (wood) or 1 (leaf): a column of other
+    values (instance ids, another tool's classes) is refused, never read as wood and leaf."""
     bad = np.setdiff1d(np.unique(labels), [0, 1])
     if bad.size:
         shown = ", ".join(str(int(b)) for b in bad[:5])
-        raise fail(path, f"labels must be 0 (wood) or 1 (leaf); found {shown}")
+        raise fail(path, f"labels must be 0 (wood) or 1 (leaf); found {shown} in column '{name}' (classes of "
+                         "another scheme? rename that column 'classification' to read the points without it)")
 
 
 def from_table(
     path: Path, table: np.ndarray, names: list[str] | None = None, rgb_at: int = 3
 ) -> Raw:
-    """A ``Raw`` cloud from an (N, C>=3) table; ``names`` (C,) from a header, if any.
+    """A ``Raw`` cloud from an (N, C>=3) table; ``names`` from a header, if any (``header_columns``).
 
     A header naming x, y and z names the colours too: only named colour columns count (a PDAL CSV's
-    Intensity, ReturnNumber, NumberOfReturns are no colours). Without one, colours are taken from
-    columns ``rgb_at`` .. ``rgb_at + 2`` when their values all lie in 0..1 or 0..255.
+    Intensity, ReturnNumber, NumberOfReturns are no colours). A header naming some of x, y, z never
+    lets the first three columns stand in for them unless each named one is where it would be taken
+    from (x first, y second, z third). Without such a header, colours are taken from columns
+    ``rgb_at`` .. ``rgb_at + 2`` when their values all lie in 0..1 or 0..255.
     """
     raw: Raw = {"points": table[:, :3]}
-    named = names is not None and all(k in names for k in "xyz")
-    if named and len(names) == table.shape[1]:
-        return from_named(path, dict(zip(names, table.T)))
-    if not named and table.shape[1] >= rgb_at + 3:
+    if names is not None and any(k in names for k in "xyz"):
+        names = header_columns(path, names, table)
+        if all(k in names for k in "xyz"):
+            return from_named(path, dict(zip(names, table.T)))
+        misplaced = [k for i, k in enumerate("xyz") if k in names and names.index(k) != i]
+        if misplaced:
+            missing = " and ".join(k for k in "xyz" if k not in names)
+            raise fail(path, f"its header names no {missing} column, and its {', '.join(misplaced)} column is "
+                             f"not where x, y, z would be taken from (header: {_shown(names)}); name all three")
+        return raw
+    if table.shape[1] >= rgb_at + 3:
         raw["colors"] = scale_colors(table[:, rgb_at : rgb_at + 3])
     return raw
+
+
+def header_columns(path: Path, names: list[str], table: np.ndarray) -> list[str]:
+    """The header ``names`` one per column of ``table``, or InputError when they cannot be matched.
+
+    Empty names after the last column (a delimiter ending the header line) are dropped. One name short,
+    with a first column of row numbers (whole numbers, rising: R's ``write.table`` writes no name over
+    its row names, which rise by more than 1 after rows were dropped), the first column is taken as
+    unnamed. Any other mismatch is refused: before
+    session 12 it fell back to the first three columns, and a file with an index column was read as
+    (index, x, y)."""
+    ncols = table.shape[1]
+    names = list(names)
+    while len(names) > ncols and names[-1] == "":
+        names.pop()
+    if len(names) == ncols - 1 and _row_numbers(table[:, 0]):
+        names.insert(0, "")
+    if len(names) != ncols:
+        raise fail(path, f"its header names {len(names)} columns ({_shown(names)}) but its rows hold {ncols} "
+                         "values: cannot tell which columns are x, y and z")
+    return names
+
+
+def _row_numbers(column: np.ndarray) -> bool:
+    """Whether ``column`` holds row numbers: whole numbers, each larger than the one before (no scan
+    coordinate does: sorted or not, some repeat or fall)."""
+    return bool((column == np.round(column)).all() and (np.diff(column) > 0).all())
+
+
+def _shown(names: list[str], limit: int = 8) -> str:
+    shown = ", ".join(n or "(unnamed)" for n in names[:limit])
+    return shown + (", ..." if len(names) > limit else "")
 
 
 # ---------------------------------------------------------------- PLY, LAS/LAZ, NPY (text: pointio_text)
@@ -150,7 +216,8 @@ def read_las(path: Path) -> Raw:
             path,
             f"is truncated: its header promises {las.header.point_count} points, found {len(points)}",
         )
-    raw: Raw = {"points": points}
+    scale = float(np.max(las.header.scales))
+    raw: Raw = {"points": points, "resolution": scale, "stored_as": f"LAS integers scaled by {scale:g}"}
     dims = set(las.point_format.dimension_names)
     if {"red", "green", "blue"} <= dims:
         rgb = np.stack([np.asarray(las[c]) for c in ("red", "green", "blue")], axis=1)
@@ -186,7 +253,9 @@ def read_npy(path: Path) -> Raw:
         raise fail(path, f"expected an (N, 3+) numeric array, got shape {arr.shape} of {arr.dtype}")
     if arr.shape[1] < 3:
         raise fail(path, f"has {arr.shape[1]} column(s); x, y and z need at least 3")
-    return from_table(path, arr.astype(np.float64))
+    raw = from_table(path, arr.astype(np.float64))
+    raw["resolution"], raw["stored_as"] = coordinate_resolution([arr[:, k] for k in range(3)])
+    return raw
 
 
 CONTROL_BYTES = bytes(range(0, 9)) + bytes(range(14, 32)) + b"\x7f"

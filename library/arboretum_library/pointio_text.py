@@ -19,16 +19,23 @@ from .pointio_formats import MAX_HEADER_LINES, Raw, fail, from_table
 
 
 def _is_number(token: bytes) -> bool:
+    """Whether ``token`` is a number, in double quotes or not (R's ``write.csv`` quotes its row names:
+    ``"1"``; numpy's parser takes double quotes only)."""
     try:
-        float(token)
+        float(token.strip(b'"'))
     except ValueError:
         return False
     return True
 
 
 def _header_names(line: bytes) -> list[str]:
+    """The lower-case column names of a header line, split at its commas, else its semicolons, else its
+    blanks, quotes removed. An empty name stays, as ``''``: the unnamed row-index column that pandas
+    (``,x,y,z``) and R's ``write.csv`` (``"","X","Y","Z"``) write first. Dropped, it shifted every name
+    one column left and the cloud was read as (index, x, y)."""
     text = line.decode("utf-8", "replace").strip().lstrip("/#").strip()
-    return [t.strip("\"' ").lower() for t in re.split(r"[,;\s]+", text) if t.strip("\"' ")]
+    sep = r"," if "," in text else r";" if ";" in text else r"\s+"
+    return [t.strip().strip("\"'").strip().lower() for t in re.split(sep, text)]
 
 
 def read_text(path: Path) -> Raw:
@@ -55,7 +62,9 @@ def read_text(path: Path) -> Raw:
         f.seek(bom + sum(len(ln) for ln in lines[:start]))
         table = parse_table(path, f, start + 1)
     rgb_at = 4 if path.suffix.lower() == ".pts" and table.shape[1] == 7 else 3
-    return from_table(path, table, names, rgb_at)
+    raw = from_table(path, table, names, rgb_at)
+    raw["resolution"], raw["stored_as"] = 0.0, "text"  # decimals as written: no type rounds them
+    return raw
 
 
 def find_header(lines: list[bytes]) -> tuple[list[str] | None, int | None, int]:
@@ -150,11 +159,12 @@ def parse_table(path: Path, f: BinaryIO, first_line: int) -> np.ndarray:
     rows = [r.split(b"#", 1)[0] for r in head_lines(f, 4 * ROWS_CHECKED)[0]]
     _refuse_decimal_commas(path, rows, first_line)
     sample = b"".join(rows)
-    table = _loadtxt(f, "," if b"," in sample else ";" if b";" in sample else None)
+    quoted = b'"' in sample  # R's write.csv quotes row names, PDAL and spreadsheets may quote numbers
+    table = _loadtxt(f, "," if b"," in sample else ";" if b";" in sample else None, quoted)
     if table.shape[1] < 3 or not len(table):
         f.seek(begin)
         body = f.read()
-        table = _loadtxt(io.BytesIO(body.replace(b",", b" ").replace(b";", b" ")), None)
+        table = _loadtxt(io.BytesIO(_as_blanks(body)), None)
         if table.shape[1] < 3 or not len(table):
             table = _parse_carefully(path, _rows(body), first_line)
     bad = ~np.isfinite(table).all(axis=1)
@@ -168,14 +178,14 @@ def parse_table(path: Path, f: BinaryIO, first_line: int) -> np.ndarray:
     return table
 
 
-def _loadtxt(f: BinaryIO, delimiter: str | None) -> np.ndarray:
+def _loadtxt(f: BinaryIO, delimiter: str | None, quoted: bool = False) -> np.ndarray:
     """``np.loadtxt`` of a binary stream (numbers are ASCII: latin-1 decodes any byte), or an empty
-    (0, 0) table when it refuses the data."""
+    (0, 0) table when it refuses the data. ``quoted``: values may be in double quotes."""
     text = io.TextIOWrapper(f, encoding="latin-1")
     try:
         with warnings.catch_warnings():  # "input contained no data": said by the caller, as an InputError
             warnings.simplefilter("ignore", UserWarning)
-            return np.loadtxt(text, delimiter=delimiter, ndmin=2)
+            return np.loadtxt(text, delimiter=delimiter, ndmin=2, quotechar='"' if quoted else None)
     except ValueError:
         return np.zeros((0, 0))
     finally:
@@ -184,6 +194,8 @@ def _loadtxt(f: BinaryIO, delimiter: str | None) -> np.ndarray:
 
 DECIMAL_COMMA = re.compile(rb"[-+]?\d+,\d+(?:[eE][-+]?\d+)?")
 """A number written with a decimal comma, e.g. ``-1,234`` or ``5,6e-3``."""
+QUOTED_DECIMAL_COMMA = re.compile(rb'"(' + DECIMAL_COMMA.pattern + rb')"')
+"""The same in double quotes (``"1,25","3,5"``): one value, never two columns."""
 ROWS_CHECKED = 20
 """Data rows ``_refuse_decimal_commas`` looks at."""
 
@@ -191,15 +203,18 @@ ROWS_CHECKED = 20
 def _refuse_decimal_commas(path: Path, lines: list[bytes], first_line: int) -> None:
     """InputError when a row's values are separated by spaces, tabs or semicolons and written with
     decimal commas (``1,25 3,5 7,0`` or ``1,25;3,5;7,0``): read as comma-separated columns they would
-    become twice as many whole numbers. Comma-separated rows (``1.25,3.5,7.0``, ``1, 2, 3``) pass."""
+    become twice as many whole numbers. So are quoted ones in any row (``"1,25","3,5","7,0"``).
+    Comma-separated rows (``1.25,3.5,7.0``, ``1, 2, 3``, ``"1.25","3.5","7.0"``) pass."""
     seen = 0
     for i, line in enumerate(lines):
-        tokens = [t for t in re.split(rb"[;\s]+", line.split(b"#", 1)[0]) if t]
+        row = line.split(b"#", 1)[0]
+        tokens = [t for t in re.split(rb"[;\s]+", row) if t]
         if not tokens:
             continue
         commas = [t for t in tokens if DECIMAL_COMMA.fullmatch(t)]
-        if len(tokens) >= 3 and commas and all(b"," not in t or t in commas for t in tokens):
-            example = commas[0].decode("utf-8", "replace")
+        quoted = QUOTED_DECIMAL_COMMA.search(row)
+        if quoted or (len(tokens) >= 3 and commas and all(b"," not in t or t in commas for t in tokens)):
+            example = (quoted.group(1) if quoted else commas[0]).decode("utf-8", "replace")
             raise fail(path, f"line {first_line + i}: '{example}' looks like a number with a decimal comma; "
                              "decimal commas? convert them to points (e.g. sed 's/,/./g') and read it again")
         seen += 1
@@ -207,10 +222,17 @@ def _refuse_decimal_commas(path: Path, lines: list[bytes], first_line: int) -> N
             return
 
 
+def _as_blanks(body: bytes) -> bytes:
+    """``body`` with commas, semicolons and double quotes turned to spaces."""
+    for char in (b",", b";", b'"'):
+        if char in body:
+            body = body.replace(char, b" ")
+    return body
+
+
 def _rows(body: bytes) -> list[bytes]:
-    """The lines of ``body`` with delimiters turned to spaces and ``#`` comments removed."""
-    if b"," in body or b";" in body:
-        body = body.replace(b",", b" ").replace(b";", b" ")
+    """The lines of ``body`` with delimiters and quotes turned to spaces and ``#`` comments removed."""
+    body = _as_blanks(body)
     rows = body.splitlines()
     return [r.split(b"#", 1)[0] for r in rows] if b"#" in body else rows
 
