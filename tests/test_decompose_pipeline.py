@@ -484,7 +484,8 @@ def test_cli_stores_examples_and_saves_hbl(truth, tmp_path, capsys):
 
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(store, "write_folder", interrupted_write)
-        assert main(["decompose", str(scan), "--main", "4", "--lobes", "10", "--up", "z", "--library", str(lib)]) == 130
+        assert main(["decompose", str(scan), "--main", "4", "--lobes", "10", "--up", "z", "--library", str(lib),
+                     "--rebuild"]) == 130  # the same scan and options again: only --rebuild stores it again
     with Library.open(lib) as library:  # the two examples written before it are taken back
         assert len(calls) == 3 and sorted(library.ids()) == sorted(data["stored"])
     assert main(["decompose", str(scan), "--species", "oak", "--up", "z", "--json"]) == 0
@@ -496,8 +497,9 @@ def test_cli_stores_examples_and_saves_hbl(truth, tmp_path, capsys):
     assert main(["decompose", str(scan), "--main", "90", "--up", "z", "--json"]) == 0  # more than the tree has
     data = json.loads(capsys.readouterr().out)
     got = data["stats"]["main_branches"]
-    assert got < 90 and data["notes"] == [f"{got} main branches found, 90 asked: the other candidate paths "
-                                          "merged into them (Algorithm 1)"]
+    assert got < 90 and data["notes"][0] == (f"{got} main branches found, 90 asked: the other candidate paths "
+                                             "merged into them (Algorithm 1)")
+    assert data["notes"][1:] == [f"8 of {got} examples have no lobes: they grow no twigs or leaves"]
 
 
 def test_a_cloud_of_foliage_only_gets_a_note(tmp_path, capsys):

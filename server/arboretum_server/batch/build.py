@@ -44,7 +44,8 @@ from .scans import expand_scans
 from .tasks import MALLOC_STATIC, WORKER_CONFIG, WORKER_ENV, ScanOutcome, decompose_scan
 from .waiting import Waiting, completed
 
-__all__ = ["BuildOptions", "BuildResult", "ScanRecord", "build_library", "expand_scans", "species_for"]
+__all__ = ["BuildOptions", "BuildResult", "ScanRecord", "build_library", "expand_scans", "species_for",
+           "species_guess"]
 
 
 @dataclass(frozen=True)
@@ -52,8 +53,8 @@ class BuildOptions:
     """How ``build_library`` runs."""
 
     species: str | None = None
-    """Species of every scan; None: a species name found in the file name (e.g. 'apple_03.ply'), else
-    'unknown'. Picks N_m and N_l (VRTree Table 2)."""
+    """Species of every scan; None: the one species the file name names as a word (``species_guess``:
+    'apple_03.ply' -> apple), else 'unknown'. Picks N_m and N_l (VRTree Table 2)."""
     workers: int = 2
     """Worker processes of the LocalCluster (ignored with ``scheduler``)."""
     scheduler: str | None = None
@@ -118,32 +119,64 @@ class BuildResult:
     ignored: list[tuple[str, str]] = field(default_factory=list)
     """(path, why) of the files left out as recognisably not point clouds, and of subfolders holding
     point clouds not read (``expand_scans``)."""
+    notes: list[str] = field(default_factory=list)
+    """Notes on the build's options, said once rather than for every scan (an implausible --height)."""
 
     def count(self, status: str) -> int:
         return sum(r.status == status for r in self.records)
 
 
+GUESSED = ("oak", "birch")
+"""Species guessed from file names besides those of VRTree Table 2 (``SPECIES_COUNTS``)."""
+
+
 def species_for(path: str, given: str | None) -> str:
-    """``given`` (lower case), else the first VRTree/harmonic species named in the file name, else 'unknown'."""
-    if given:
-        return given.lower()
+    """``given`` (lower case), else ``species_guess``'s species."""
+    return given.lower() if given else species_guess(path)[0]
+
+
+def species_guess(path: str) -> tuple[str, str]:
+    """(species, note) from the file name: the species that its words name ('' note), else 'unknown'
+    (with a note when it names several). Words are the runs of letters of the name without its suffix,
+    case folded, so a species inside a longer word is no species ('pinewood', 'Pinecrest', 'pineapple');
+    a plural counts ('oaks', 'birches', 'cherries')."""
+    import re
+
     from arboretum_server.decompose.options import SPECIES_COUNTS
 
-    known = sorted({*SPECIES_COUNTS, "oak", "birch"}, key=len, reverse=True)
-    name = Path(path).name.lower()
-    return next((s for s in known if s in name), "unknown")
+    words = {form: s for s in (*SPECIES_COUNTS, *GUESSED) for form in (s, _plural(s))}
+    found: list[str] = []
+    for word in re.findall(r"[^\W\d_]+", Path(path).stem.casefold()):
+        if word in words and words[word] not in found:
+            found.append(words[word])
+    if len(found) == 1:
+        return found[0], ""
+    if not found:
+        return "unknown", ""
+    return "unknown", (f"its file name names {len(found)} species ({', '.join(found)}): none guessed, so "
+                       "'unknown' (N_m = 8, N_l = 40); rename the file, or build it alone with --species")
+
+
+def _plural(word: str) -> str:
+    """The English plural of a species name: birches, cherries, oaks."""
+    if word.endswith(("s", "x", "z", "ch", "sh")):
+        return f"{word}es"
+    if word.endswith("y") and word[-2:-1] not in "aeiou":
+        return f"{word[:-1]}ies"
+    return f"{word}s"
 
 
 def build_library(scans: list[str], library: str | os.PathLike, options: BuildOptions = BuildOptions(),
                   progress: ProgressFn = no_progress) -> BuildResult:
     """Decompose ``scans`` into examples stored in ``library`` (created if missing); see the module doc."""
     from arboretum_library.store import Library
+    from arboretum_server.decompose.notes import height_notes
 
     t0 = time.perf_counter()
     ignored: list[tuple[str, str]] = []
     files = expand_scans(scans, ignored, options.recursive)
-    records = [ScanRecord(p, species_for(p, options.species)) for p in files]
-    result = BuildResult(str(library), records, ignored=ignored)
+    records = [_record(p, options.species) for p in files]
+    result = BuildResult(str(library), records, ignored=ignored, notes=height_notes(options.height))
     with Library.open(library, create=True, fsync=False) as lib:
         todo = plan(lib, records, options)
         progress(0, max(len(todo), 1), _status(result, 0, len(todo)))
@@ -155,6 +188,14 @@ def build_library(scans: list[str], library: str | os.PathLike, options: BuildOp
     result.redone = sum(bool(r.replace) and r.status == "added" for r in records)
     result.wall_seconds = time.perf_counter() - t0
     return result
+
+
+def _record(path: str, species: str | None) -> ScanRecord:
+    """The record of one scan to build, its species given or guessed (with a note when no guess)."""
+    if species:
+        return ScanRecord(path, species.lower())
+    guess, note = species_guess(path)
+    return ScanRecord(path, guess, notes=[note] if note else [])
 
 
 def _run_cluster(lib, todo: list[ScanRecord], o: BuildOptions, result: BuildResult,
@@ -218,6 +259,13 @@ class _Cluster:
         self.hidden: dict[str, str] = {}
 
     def __enter__(self) -> tuple[Any, str, int]:
+        try:
+            return self._start()
+        except BaseException as exc:  # e.g. a SIGTERM that waited for the start: what started is stopped
+            self.__exit__(type(exc), exc, exc.__traceback__)
+            raise
+
+    def _start(self) -> tuple[Any, str, int]:
         from distributed import Client, LocalCluster
 
         if self.o.scheduler:
@@ -234,7 +282,7 @@ class _Cluster:
         # have left that variable (nannies os.environ.update() their pre-spawn environment): hide it.
         self.hidden = {k: os.environ.pop(k) for k in MALLOC_STATIC if k in os.environ}
         with dask.config.set({"distributed.nanny.pre-spawn-environ": dict(WORKER_ENV), **WORKER_CONFIG}), \
-                _workers_ignore_sigint():
+                _workers_ignore_sigint(), _sigterm_waits():
             # no dashboard; the scheduler's HTTP server (health, metrics) on a free port, so that another
             # cluster on port 8787 brings no "Port 8787 is already in use" warning
             self.cluster = LocalCluster(n_workers=self.o.workers, threads_per_worker=1, processes=True,
@@ -245,7 +293,7 @@ class _Cluster:
 
     def __exit__(self, kind, *exc) -> None:
         if kind is not None and issubclass(kind, KeyboardInterrupt):
-            # Ctrl-C: the workers are stopped, killed when busy in a task; Dask's warnings about that
+            # Ctrl-C or SIGTERM (Terminated): the workers are stopped, killed when busy in a task; Dask's warnings about that
             # ("Worker process still alive after 4.0 seconds, killing") say nothing to the user
             import logging
 
@@ -273,3 +321,53 @@ def _workers_ignore_sigint() -> Iterator[None]:
     finally:
         signal.signal(signal.SIGINT, previous)
 
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``, a service manager) under ``sigterm_stops``: the build stops as on Ctrl-C (tasks
+    cancelled, the cluster shut down, what was stored kept); ``arboretum library build`` exits 143."""
+
+
+_TERM = {"starting": False, "pending": False}
+"""``sigterm_stops``'s state: a SIGTERM while the LocalCluster starts waits until it is up (``pending``)."""
+
+
+@contextlib.contextmanager
+def sigterm_stops() -> Iterator[None]:
+    """Raise ``Terminated`` in the main thread on SIGTERM, once: a second one while the workers shut down
+    is ignored, so the shutdown completes (killed mid-way, the client left its workers' semaphores to
+    Python's "leaked semaphore objects" warning). While the LocalCluster starts it waits until the
+    cluster is up (``_sigterm_waits``). Outside the main thread a no-op. Used by the command, not by
+    ``build_library``: a library function leaves the process's signals alone."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(*_) -> None:
+        if _TERM["starting"]:
+            _TERM["pending"] = True
+            return
+        signal.signal(signal.SIGTERM, lambda *_: None)  # a Python handler: children do not inherit it
+        raise Terminated
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        _TERM.update(starting=False, pending=False)
+
+
+@contextlib.contextmanager
+def _sigterm_waits() -> Iterator[None]:
+    """Hold a SIGTERM (under ``sigterm_stops``) while the block starts the LocalCluster, and raise it
+    after: raised inside the start, it would leave worker processes behind."""
+    _TERM["starting"] = True
+    try:
+        yield
+    finally:
+        _TERM["starting"] = False
+    if _TERM["pending"]:
+        _TERM["pending"] = False
+        signal.signal(signal.SIGTERM, lambda *_: None)
+        raise Terminated

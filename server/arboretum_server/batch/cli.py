@@ -8,10 +8,11 @@ SCANS are files or folders (every point-cloud file inside, and with --recursive 
 files that are recognisably not point clouds, such as TreeQSM cylinder tables, are left out with a
 note). Run it again after an interruption: scans already in the library are skipped (examples deleted
 since stay deleted; a note says when they were made with other options); --rebuild decomposes them
-again with this run's options and replaces their examples. Exit status: 0 when every scan was stored
-(or already there), 1 when any scan failed (the others are stored), 2 for a mistake in the arguments,
-130 after Ctrl-C. A library this build created is removed again when nothing was stored in it. See
-docs/batch.md.
+again with this run's options and replaces their examples. Without --species, a scan's species is the
+one species its file name names as a word (oak_03.ply: oak; pinewood_oak.ply: oak). Exit status: 0 when
+every scan was stored (or already there), 1 when any scan failed (the others are stored), 2 for a
+mistake in the arguments, 130 after Ctrl-C, 143 after SIGTERM (stopped as Ctrl-C stops it). A library
+this build created is removed again when nothing was stored in it. See docs/batch.md.
 """
 
 from __future__ import annotations
@@ -70,6 +71,21 @@ def check_args(args: argparse.Namespace) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    """The command; SIGTERM stops it as Ctrl-C does, then exits 143 (128 + SIGTERM) with one line."""
+    import sys
+
+    from .build import Terminated, sigterm_stops
+
+    folder = check_args(args)
+    with sigterm_stops():
+        try:
+            return _build(args, folder)
+        except Terminated:
+            print(f"arboretum {args.command}: interrupted (SIGTERM)", file=sys.stderr, flush=True)
+            return 143
+
+
+def _build(args: argparse.Namespace, folder: str) -> int:
     import os
     from pathlib import Path
 
@@ -79,7 +95,6 @@ def run(args: argparse.Namespace) -> int:
     from .report import as_dict, write_report
 
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-    folder = check_args(args)
     opts = BuildOptions(species=args.species, workers=args.workers, scheduler=args.scheduler,
                         points=args.points, height=args.height, seed=args.seed, rebuild=args.rebuild,
                         recursive=args.recursive, worker_timeout=args.worker_timeout)
@@ -133,6 +148,7 @@ def _text(d: dict) -> str:
     lines = [f"{d['library']}: {counted(d['added'], 'scan')} added ({counted(d['examples_added'], 'example')}{redone}), "
              f"{d['skipped']} already there, {counted(d['duplicate'], 'duplicate')}, {d['failed']} failed, "
              f"in {d['wall_seconds']:.1f} s on {counted(d['workers'], 'worker')} ({d['cluster'] or 'no cluster needed'})"]
+    lines += [f"  note: {n}" for n in d.get("notes", [])]
     lines += [f"  failed: {r['path']}: {r['error']}" for r in d["records"] if r["status"] == "failed"]
     lines += [f"  note: {r['path']}: {n}" for r in d["records"] for n in r["notes"]]
     lines += [f"  left out: {i['path']}: {i['why']}" for i in d.get("ignored", [])]

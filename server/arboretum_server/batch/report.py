@@ -40,6 +40,7 @@ def as_dict(result: BuildResult) -> dict[str, Any]:
                      "examples": r.examples, "error": r.error, "seconds": r.seconds,
                      "points": r.stats.get("points_read"), "notes": r.notes} for r in result.records],
         "ignored": [{"path": p, "why": why} for p, why in result.ignored],
+        "notes": list(result.notes),
     }
 
 
@@ -113,7 +114,7 @@ def markdown(data: dict[str, Any], plots: dict[str, str]) -> str:
         f"{data['skipped']} already in the library, {counted(data['duplicate'], 'duplicate')}, {data['failed']} failed"
         + (f"; {data['redone']} in the library done again (--rebuild, or damaged)" if data["redone"] else ""),
         f"- time: {data['wall_seconds']:.1f} s wall, {data['worker_seconds']:.1f} s of worker time "
-        f"({speed:.2f}x)", "",
+        f"({speed:.2f}x)", *[f"- note: {_cell(n)}" for n in data.get("notes", [])], "",
     ]
     for name, title in (("curvature_lobes", "Curvature and lobes of every example in the library"),
                         ("scan_seconds", "Seconds per scan"), ("scan_examples", "Examples per scan")):

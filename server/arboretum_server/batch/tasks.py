@@ -115,13 +115,16 @@ def _failed(path: str, sha256: str, message: str, t0: float) -> ScanOutcome:
 def _decompose(path: str, sha256: str, options: dict[str, Any], t0: float) -> ScanOutcome:
     from arboretum_library.pointio import read_points
     from arboretum_server.decompose.examples import counter_ids, make_examples, provenance
-    from arboretum_server.decompose.notes import result_notes
+    from arboretum_server.decompose.notes import bare_note, result_notes, up_guess_flat
     from arboretum_server.decompose.options import DecomposeOptions
     from arboretum_server.decompose.pipeline import decompose
 
     opts = DecomposeOptions(**options)
     cloud = read_points(path)
     t_read = time.perf_counter()
+    if why := up_guess_flat(cloud.points, "auto", cloud.up_axis):  # a wall in a Z-up file
+        return _failed(path, sha256, f"{why}: a build reads every scan with --up auto; if Z is up in the file, "
+                       "decompose it alone: arboretum decompose SCAN --up z --library LIB", t0)
     dec = decompose(cloud.points, opts, labels=cloud.labels)
     t_dec = time.perf_counter()
     prov = provenance(path, opts, sha256=sha256)
@@ -129,7 +132,10 @@ def _decompose(path: str, sha256: str, options: dict[str, Any], t0: float) -> Sc
     if not examples:
         return _failed(path, sha256, "decomposition gave no examples (no main branch found)", t0)
     said = result_notes(opts, dec.stats)  # the species note would repeat for every scan of a species
-    params = {**prov.parameters, SCAN_EXAMPLES_KEY: len(examples), NOTES_KEY: said}
+    params = {**prov.parameters, SCAN_EXAMPLES_KEY: len(examples), NOTES_KEY: list(said)}
+    # examples without lobes: said when made, not stored with the notes (the user may delete those
+    # examples, and a rerun would repeat a stale count); placeholder ids, so none named
+    said += [bare] if (bare := bare_note(examples)) else []
     examples = [replace(e, provenance=replace(e.provenance, parameters=params)) for e in examples]
     t_end = time.perf_counter()
     seconds = {"read": t_read - t0, "decompose": t_dec - t_read, "examples": t_end - t_dec, "total": t_end - t0}

@@ -2,7 +2,11 @@
 
     arboretum decompose scan.xyz --species apple --library lib/ [--main N] [--lobes N]
         [--points 12000] [--height 0.8] [--seed 0] [--reach-weight W] [--save-hbl tree.npz] [--no-labels]
-        [--min-points 200] [--json]
+        [--min-points 200] [--rebuild] [--json]
+
+A scan already in LIB (the same bytes, decomposed with the same options) is not stored again: the run
+names the examples there and stores nothing; --rebuild decomposes it again and replaces them (as
+``arboretum library build --rebuild`` does).
 
 A sparse cloud (a photo reconstruction keeps about 120 tree points) needs a lower --min-points and
 small --main and --lobes (at most a tenth of the points): ``--min-points 100 --main 3 --lobes 8``.
@@ -41,6 +45,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--min-points", type=int, default=None, metavar="N",
                    help="fewest usable points a tree may have (default 200; down to 10 for a sparse cloud, "
                         "with small --main and --lobes)")
+    p.add_argument("--rebuild", action="store_true",
+                   help="the scan is in --library already (same file, same options): decompose it again and "
+                        "replace its examples (default: store nothing)")
     add_json_flag(p)
     p.set_defaults(func=run)
 
@@ -101,7 +108,8 @@ def run(args: argparse.Namespace) -> int:
     from arboretum_library.pointio import ReadOptions, read_points
     from arboretum_library.progress import StatusLine
 
-    from .notes import notes
+    from .examples import file_sha256, provenance
+    from .notes import bare_note, notes
 
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     options = _options(args)
@@ -111,20 +119,72 @@ def run(args: argparse.Namespace) -> int:
     cloud = read_points(args.scan, ReadOptions(up=args.up))
     t_read = time.perf_counter() - t0
     _check_usable(args.scan, cloud, options)
+    _check_up(args.scan, cloud, args.up)
+    prov = provenance(args.scan, options, sha256=file_sha256(args.scan))
     status = StatusLine() if not args.json else (lambda *a: None)
     with _library(args.library) as lib:  # opened first: a library that cannot be written fails before the work
+        there, other = _stored(lib, prov)
+        if there and not args.rebuild and not args.save_hbl:  # nothing to do: no decomposition either
+            data = _result(args, options, len(cloud.points), {"read": t_read}, None, ([], [], there), other)
+            emit(args, data, _text(data))
+            return 0
         dec = _decompose(args.scan, cloud, options, status)
         if args.save_hbl:
             _save_hbl(args.save_hbl, dec.hbl)
-        examples, stored = _store(lib, dec, args.scan, options)
-    data = {
-        "scan": args.scan, "points_read": len(cloud.points), "stats": dec.stats,
-        "timing_s": {"read": t_read, **dec.timing}, "examples": [e.id for e in examples],
-        "stored": stored, "library": str(args.library) if lib is not None else None, "hbl": args.save_hbl,
-        "options": options.as_dict(), "notes": notes(options, dec.stats),
-    }
+        stored = _store(lib, dec, args.scan, prov, args.rebuild)
+    data = _result(args, options, len(cloud.points), {"read": t_read, **dec.timing}, dec, stored, other)
+    bare = bare_note(stored[0], named=bool(stored[1]))  # library ids name them; example-000 would not
+    data["notes"] = notes(options, dec.stats) + data["notes"] + ([bare] if bare else [])
     emit(args, data, _text(data))
     return 0
+
+
+def _result(args, options, points_read: int, timing: dict, dec, stored: tuple, other: list[str]) -> dict:
+    """The run's JSON-ready result; ``stored`` is ``_store``'s (examples, ids stored, ids there already),
+    ``dec`` None when the scan was not decomposed (already in the library)."""
+    examples, ids, there = stored
+    said = [f"the library also holds {counted(len(other), 'example')} of this file made with other options "
+            f"({_ids(other)}): kept"] if other else []
+    return {
+        "scan": args.scan, "points_read": points_read, "stats": dec.stats if dec is not None else {},
+        "timing_s": timing, "examples": [e.id for e in examples], "stored": ids,
+        "already": [] if args.rebuild else there, "replaced": there if args.rebuild and ids else [],
+        "library": str(args.library) if args.library else None, "hbl": args.save_hbl if dec is not None else None,
+        "options": options.as_dict(), "notes": said,
+    }
+
+
+def _check_up(scan: str, cloud, up: str) -> None:
+    """InputError when ``--up auto`` turned the file so that all its points lie at one height (a vertical
+    wall in a Z-up file reads as Y up): said so, with ``--up z``, instead of the decomposition's "all
+    points lie at one height", false for the file as written."""
+    from arboretum_library.errors import InputError
+
+    from .notes import up_guess_flat
+
+    if why := up_guess_flat(cloud.points, up, cloud.up_axis):
+        raise InputError(f"{scan}: {why}: if Z is up in the file, pass --up z")
+
+
+def _stored(lib, prov) -> tuple[list[str], list[str]]:
+    """(ids, other ids) of the examples in ``lib`` from the scan of ``prov``, by its SHA-256 (as
+    ``library build`` finds a scan), split by whether they were made with the same options: every
+    decomposition option (``DecomposeOptions.as_dict``) equal. ([], []) without a library."""
+    import json
+
+    if lib is None or not prov.source_sha256:
+        return [], []
+    want = json.loads(json.dumps(prov.parameters))  # as meta.json holds them
+    same, other = [], []
+    for id_ in sorted(lib.find_source(prov.source_sha256)):
+        params = lib.provenance(id_).parameters
+        (same if all(params.get(k) == v for k, v in want.items()) else other).append(id_)
+    return same, other
+
+
+def _ids(ids: list[str]) -> str:
+    """Up to 8 of ``ids``, then '...'."""
+    return ", ".join(ids[:8]) + (", ..." if len(ids) > 8 else "")
 
 
 @contextmanager
@@ -168,35 +228,54 @@ def _save_hbl(path: str, hbl) -> None:
         raise InputError(f"--save-hbl {path}: cannot write it ({exc.strerror or exc})") from None
 
 
-def _store(lib, dec, scan: str, options) -> tuple[list, list[str]]:
-    """(examples, ids stored): a tree goes into ``lib`` whole or not at all (``Library.add_new`` picks
-    the ids under the write lock and takes back what it stored when a write fails or Ctrl-C comes)."""
-    from .examples import counter_ids, make_examples, provenance
+def _store(lib, dec, scan: str, prov, rebuild: bool) -> tuple[list, list[str], list[str]]:
+    """(examples, ids stored, ids of the scan already there with the same options): a tree goes into
+    ``lib`` whole or not at all (``Library.add_new`` picks the ids under the write lock and takes back
+    what it stored when a write fails or Ctrl-C comes). A scan already there is not stored again; with
+    ``rebuild`` its new examples are stored, then the old ones deleted, in one hold of the lock (as
+    ``library build --rebuild``: a failure keeps the old ones)."""
+    from .examples import counter_ids, make_examples
 
-    prov = provenance(scan, options)
     if lib is None:
-        return make_examples(dec.hbl, prov, counter_ids("example")), []
+        return make_examples(dec.hbl, prov, counter_ids("example")), [], []
     stem = os.path.splitext(os.path.basename(scan))[0]
-    examples = lib.add_new(make_examples(dec.hbl, prov), stem)
-    return examples, [e.id for e in examples]
+    with lib.locked():  # checked again: another writer may have stored it while this run decomposed
+        there, _ = _stored(lib, prov)
+        if there and not rebuild:
+            return make_examples(dec.hbl, prov, counter_ids("example")), [], there
+        examples = lib.add_new(make_examples(dec.hbl, prov), stem)
+        for id_ in there:
+            if id_ in lib:
+                lib.delete(id_)
+    return examples, [e.id for e in examples], there
 
 
 def _text(d: dict) -> str:
     s = d["stats"]
+    if not s:  # already in the library: not decomposed
+        return "\n".join([f"{d['scan']}: {d['points_read']} points read", *_stored_lines(d)])
     steps = ", ".join(f"{k} {v * 1000:.0f} ms" for k, v in d["timing_s"].items())
-    lines = [
+    return "\n".join([
         f"{d['scan']}: {d['points_read']} points read, {s['points']} used, {s['leaf_points']} leaf, "
         f"{s['ground_removed']} ground removed",
         f"graph: {counted(s['components'], 'component')} joined by {counted(s['bridges'], 'bridge')}",
         f"HBL: {s['main_branches']} main branches, {s['lobes']} lobes ({s['alpha_shapes']} alpha shapes, "
         f"{s['hull_fallbacks']} convex fallbacks), foliage from {s['foliage_source']}",
         f"time: {steps} (total {sum(d['timing_s'].values()):.2f} s)",
-    ]
-    if d["library"]:
-        lines.append(f"stored {counted(len(d['stored']), 'example')} in {d['library']}: {', '.join(d['stored'])}")
+        *_stored_lines(d),
+    ])
+
+
+def _stored_lines(d: dict) -> list[str]:
+    """What went into the library (or why nothing did), the HBL file, the notes."""
+    if d["already"]:
+        lines = [f"already in {d['library']} as ids {_ids(d['already'])} (this file, decomposed with the same "
+                 "options): nothing stored; --rebuild decomposes it again and replaces them"]
+    elif d["library"]:
+        lines = [f"stored {counted(len(d['stored']), 'example')} in {d['library']}: {', '.join(d['stored'])}"
+                 + (f"; replaced {_ids(d['replaced'])} (--rebuild)" if d["replaced"] else "")]
     else:
-        lines.append(f"{counted(len(d['examples']), 'example')} made (not stored: no --library given)")
+        lines = [f"{counted(len(d['examples']), 'example')} made (not stored: no --library given)"]
     if d["hbl"]:
         lines.append(f"whole-tree HBL saved to {d['hbl']}")
-    lines += [f"note: {n}" for n in d["notes"]]
-    return "\n".join(lines)
+    return lines + [f"note: {n}" for n in d["notes"]]

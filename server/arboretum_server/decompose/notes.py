@@ -21,7 +21,48 @@ scans repeat points; scanners write rows without a return as (0, 0, 0)): the rep
 
 def notes(options: DecomposeOptions, stats: dict) -> list[str]:
     """Every note for a decomposition run with ``options`` that gave ``stats`` (``Decomposition.stats``)."""
-    return option_notes(options) + result_notes(options, stats)
+    return option_notes(options) + height_notes(options.height) + result_notes(options, stats)
+
+
+def height_notes(height: float | None) -> list[str]:
+    """A note for an output height (``--height``, metres; None: kept in the scan's units, see
+    ``result_notes``) outside ``TREE_HEIGHTS``: 1e-9 makes a 1 nm tree, 1e6 a 1,000 km one. A note, not
+    a refusal: a model may be wanted at any scale."""
+    if height is None or TREE_HEIGHTS[0] <= height <= TREE_HEIGHTS[1]:
+        return []
+    what = "taller than any tree" if height > TREE_HEIGHTS[1] else "smaller than a seedling"
+    return [f"--height {height:g} m is {what} (trees are {TREE_HEIGHTS[0]:g}-{TREE_HEIGHTS[1]:g} m tall): the "
+            "examples are stored at that size (the default is VRTree's 0.8 m)"]
+
+
+def bare_note(examples: list, named: bool = False) -> str | None:
+    """The note on examples without lobes (a short main-branch stub that fed no lobe: it grows no twigs
+    or leaves), None when every example has one; ``named``: their ids follow (up to 4). The wording of
+    the service's ``refine.commit``."""
+    bare = [e.id for e in examples if not e.structure.lobes]
+    if not bare:
+        return None
+    ids = f" ({', '.join(bare[:4])}{', ...' if len(bare) > 4 else ''})" if named else ""
+    return f"{len(bare)} of {len(examples)} examples have no lobes{ids}: they grow no twigs or leaves"
+
+
+def up_guess_flat(points_zup, up_asked: str, up_read: str) -> str | None:
+    """Why a cloud read with ``--up auto`` lies at one height when the guess turned it (``up_read``
+    'y'), yet the file as written does not (its Z spreads): a vertical wall in a Z-up file reads as Y up
+    (``pointio.guess_up_axis``) and then lies flat. The message, else None. ``points_zup`` (N, 3) as read."""
+    import numpy as np
+
+    if up_asked != "auto" or up_read != "y":
+        return None
+    pts = np.asarray(points_zup, dtype=np.float64)
+    pts = pts[np.isfinite(pts).all(axis=1)]
+    if len(pts) == 0 or np.ptp(pts[:, 2]) > 0:
+        return None
+    file_z = np.ptp(pts[:, 1])  # yup_to_zup: the file's z is -y as read
+    if file_z <= 0:
+        return None
+    return (f"--up auto guessed the file is Y up and turned it, which lays all its points at one height; "
+            f"as written they spread {file_z:.3g} along Z")
 
 
 def result_notes(options: DecomposeOptions, stats: dict) -> list[str]:

@@ -1,0 +1,133 @@
+"""``arboretum library build`` (session 12): species from whole words of the file name, notes on bare
+examples and an implausible --height, a wall laid flat by the up guess named, SIGTERM handled as Ctrl-C."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from arboretum_library.assets import sample_scans
+from arboretum_library.cli import main
+from arboretum_library.store import Library
+from arboretum_server.batch.build import BuildOptions, build_library, species_for
+from arboretum_server.batch.tasks import NOTES_KEY, SCAN_EXAMPLES_KEY, decompose_scan
+from arboretum_server.decompose.examples import file_sha256
+
+PINE = sample_scans()[3]
+BARE = "1 of 6 examples have no lobes: they grow no twigs or leaves"
+
+
+@pytest.mark.parametrize(("name", "species"), [
+    ("oak_at_pinewood_02.xyz", "oak"), ("Pinecrest_Park_oak_03.laz", "oak"), ("pineapple_field_tree.xyz", "unknown"),
+    ("maple_birchwood_rd_01.las", "unknown"), ("soaked_maple_05.xyz", "unknown"), ("red_oak_12.laz", "oak"),
+    ("/data/Cherry_tree_07.ply", "cherry"), ("cherries-2.ply", "cherry"), ("BIRCHES.xyz", "birch"),
+    ("apples_2.ply", "apple"), ("pine_pine.xyz", "pine"), ("cherry_hill_walnut_2.ply", "unknown"),
+    ("/pine/x.xyz", "unknown"),  # the file name only, not its folders
+])
+def test_species_from_whole_words_of_the_file_name(name, species):
+    assert species_for(name, None) == species
+    assert species_for(name, "Ginkgo") == "ginkgo"
+
+
+def test_several_species_named_give_unknown_and_a_note(tmp_path, capsys):
+    lib = tmp_path / "L"
+    assert main(["decompose", str(PINE), "--species", "pine", "--library", str(lib)]) == 0
+    both = tmp_path / "pine_and_oak_01.xyz"
+    shutil.copy(PINE, both)  # the same bytes: a duplicate of a scan already there, so no cluster starts
+    result = build_library([str(PINE), str(both)], lib, BuildOptions(species=None))
+    skipped, dup = result.records
+    assert (skipped.status, skipped.species, dup.status, dup.species) == ("skipped", "pine", "duplicate", "unknown")
+    assert dup.notes == ["its file name names 2 species (pine, oak): none guessed, so 'unknown' (N_m = 8, "
+                         "N_l = 40); rename the file, or build it alone with --species"]
+
+
+def test_a_bare_example_is_noted_when_made():
+    out = decompose_scan(str(PINE), file_sha256(PINE), {"species": "pine"})
+    assert out.error == "" and len(out.examples) == 6
+    assert sum(not e.structure.lobes for e in out.examples) == 1
+    assert list(out.notes) == [BARE]
+    assert out.examples[0].provenance.parameters[NOTES_KEY] == []  # not stored: those examples may be deleted
+
+
+def test_a_wall_laid_flat_by_the_up_guess_fails_with_its_reason(tmp_path):
+    rng = np.random.default_rng(0)
+    wall = tmp_path / "wall.xyz"
+    np.savetxt(wall, np.c_[rng.uniform(0, 2, 5000), np.zeros(5000), rng.uniform(0, 3, 5000)], fmt="%.4f")
+    out = decompose_scan(str(wall), file_sha256(wall), {})
+    assert out.error.startswith("--up auto guessed the file is Y up and turned it, which lays all its points at "
+                                "one height; as written they spread 3 along Z")
+    assert out.error.endswith("arboretum decompose SCAN --up z --library LIB") and not out.examples
+
+
+def test_an_implausible_height_is_noted_once_for_the_build(tmp_path, capsys):
+    lib = tmp_path / "L"
+    assert main(["decompose", str(PINE), "--library", str(lib)]) == 0
+    capsys.readouterr()
+    note = "--height 1e+06 m is taller than any tree (trees are 0.05-150 m tall): the examples are stored at that size"
+    result = build_library([str(PINE)], lib, BuildOptions(height=1e6))  # skipped: no cluster
+    assert len(result.notes) == 1 and result.notes[0].startswith(note)
+    assert build_library([str(PINE)], lib, BuildOptions(height=0.8)).notes == []
+    assert main(["library", "build", str(PINE), "--library", str(lib), "--height", "1e6", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["notes"] == result.notes and not any("1e+06" in n for n in data["records"][0]["notes"])
+    assert main(["library", "build", str(PINE), "--library", str(lib), "--height", "1e-9"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[1].startswith("  note: --height 1e-09 m is smaller than a seedling")
+    assert "- note: --height 1e-09 m is smaller than a seedling" in (tmp_path / "L-report" / "report.md").read_text()
+
+
+def test_sigterm_raises_terminated_once_and_waits_for_the_cluster_start():
+    from arboretum_server.batch.build import Terminated, _sigterm_waits, sigterm_stops
+
+    before = signal.getsignal(signal.SIGTERM)
+    with sigterm_stops():
+        with pytest.raises(Terminated):
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(1)
+        os.kill(os.getpid(), signal.SIGTERM)  # a second one, while shutting down: ignored
+        time.sleep(0.1)
+    assert signal.getsignal(signal.SIGTERM) is before
+    with sigterm_stops():
+        with pytest.raises(Terminated), _sigterm_waits():
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(0.1)
+            started = True  # not cut short: raised when the block ends
+        assert started
+
+
+@pytest.mark.slow
+def test_sigterm_stops_the_build_with_one_line(tmp_path):
+    from arboretum_server.batch.synthetic import synthetic_scans
+
+    scans = synthetic_scans(tmp_path / "s", 10, points=1500)
+    lib = tmp_path / "lib"
+    argv = [sys.executable, "-m", "arboretum_library.cli", "library", "build", *map(str, scans), "--library",
+            str(lib), "--workers", "2", "--points", "1500"]
+    proc = subprocess.Popen(argv, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            env={**os.environ, "OMP_WAIT_POLICY": "PASSIVE"})
+    try:
+        t0 = time.monotonic()
+        while not (lib / "examples").is_dir() or not any((lib / "examples").iterdir()):
+            assert proc.poll() is None and time.monotonic() - t0 < 120
+            time.sleep(0.1)
+        proc.send_signal(signal.SIGTERM)  # kill PID, a service manager stopping it
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    text = err.decode().replace("\r", "\n")
+    assert proc.returncode == 143 and "Traceback" not in text and "leaked semaphore" not in text
+    assert text.strip().endswith("arboretum library: interrupted (SIGTERM)")
+    with Library.open(lib, readonly=True) as L:  # what was stored is whole: every scan all or none
+        ids = [L.find_source(file_sha256(p)) for p in scans]
+        whole = [not i or len(i) == L.provenance(i[0]).parameters[SCAN_EXAMPLES_KEY] for i in ids]
+    assert 1 <= sum(map(bool, ids)) < len(scans) and all(whole)
