@@ -131,3 +131,17 @@ def test_sigterm_stops_the_build_with_one_line(tmp_path):
         ids = [L.find_source(file_sha256(p)) for p in scans]
         whole = [not i or len(i) == L.provenance(i[0]).parameters[SCAN_EXAMPLES_KEY] for i in ids]
     assert 1 <= sum(map(bool, ids)) < len(scans) and all(whole)
+
+
+def test_a_float32_scan_at_utm_is_named_and_the_note_is_kept(tmp_path):
+    """The file's precision is its own: said when built and stored with the notes a rerun repeats."""
+    from arboretum_library.pointio import read_points
+
+    pts = read_points(sample_scans()[0]).points
+    body = np.asarray(pts - pts.min(axis=0) + (5e5, 5.4e6, 300.0), dtype="<f4")
+    scan = tmp_path / "utm.ply"
+    scan.write_bytes((f"ply\nformat binary_little_endian 1.0\nelement vertex {len(body)}\nproperty float x\n"
+                      "property float y\nproperty float z\nend_header\n").encode() + body.tobytes())
+    out = decompose_scan(str(scan), file_sha256(scan), {"points": 3000})
+    assert "are only 0.5 m apart" in out.notes[0]
+    assert out.examples[0].provenance.parameters[NOTES_KEY][0] == out.notes[0]

@@ -72,7 +72,7 @@ def test_examples_without_lobes_are_named(server, draft):
         ok(server, P.RemoveLobe(session=draft, lobe=0))
     done = ok(server, P.RefineCommit(session=draft))
     assert len(done.ids) == 3
-    assert done.notes[-1] == ("3 of 3 examples have no lobes: "
+    assert done.notes[-1] == (f"3 of 3 examples have no lobes ({', '.join(done.ids)}): "
                               "they grow no twigs or leaves")
     assert np.all([ok(server, P.LibraryGet(id=i)).example.structure.lobes == () for i in done.ids])
 

@@ -188,3 +188,14 @@ def test_wood_and_leaf_labels_still_open(server):
     for req in (P.RefineOpen(session=sid, points=pts, labels=labels, options=OPTIONS),
                 P.LibraryImport(points=pts, labels=labels, options=OPTIONS)):
         assert type(server.handle(req)).__name__ == "Job"  # accepted: the decomposition would run
+
+
+# -- 4. library.import names examples without lobes, as refine.commit and decompose do ----------------
+def test_an_import_names_its_bare_examples(server):
+    pts, labels = toy()
+    done = ok(server, P.LibraryImport(points=pts, labels=labels, name="toy",
+                                      options={"n_main": 12, "n_lobes": 3, "points": 4000}))
+    bare = [i for i in done.ids if ok(server, P.LibraryGet(id=i)).example.structure.lobes == ()]
+    assert 9 <= len(bare) < len(done.ids) == 12
+    shown = ", ".join(bare[:4]) + (", ..." if len(bare) > 4 else "")
+    assert done.notes[-1] == f"{len(bare)} of 12 examples have no lobes ({shown}): they grow no twigs or leaves"

@@ -105,7 +105,7 @@ def _check_usable(scan: str, cloud, options) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from arboretum_library.outputs import check_output
-    from arboretum_library.pointio import ReadOptions, read_points
+    from arboretum_library.pointio import ReadOptions, precision_note, read_points
     from arboretum_library.progress import StatusLine
 
     from .examples import file_sha256, provenance
@@ -134,7 +134,8 @@ def run(args: argparse.Namespace) -> int:
         stored = _store(lib, dec, args.scan, prov, args.rebuild)
     data = _result(args, options, len(cloud.points), {"read": t_read, **dec.timing}, dec, stored, other)
     bare = bare_note(stored[0], named=bool(stored[1]))  # library ids name them; example-000 would not
-    data["notes"] = notes(options, dec.stats) + data["notes"] + ([bare] if bare else [])
+    coarse = precision_note(cloud)  # float32 at UTM magnitudes: the points sit on a 0.5 m grid
+    data["notes"] = ([coarse] if coarse else []) + notes(options, dec.stats) + data["notes"] + ([bare] if bare else [])
     emit(args, data, _text(data))
     return 0
 

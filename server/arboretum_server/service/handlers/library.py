@@ -83,7 +83,7 @@ def import_job(progress, library_path: str, points: np.ndarray, labels: np.ndarr
     from arboretum_library.model import Provenance
     from arboretum_library.store import Library
     from arboretum_server.decompose.examples import make_examples
-    from arboretum_server.decompose.notes import notes
+    from arboretum_server.decompose.notes import bare_note, notes
     from arboretum_server.decompose.pipeline import decompose
 
     opts = options_from(species, options)
@@ -93,6 +93,8 @@ def import_job(progress, library_path: str, points: np.ndarray, labels: np.ndarr
     stem = "".join(c if c.isalnum() or c in "-_" else "-" for c in name)[:60] or "scan"
     with Library.open(library_path) as lib:  # made by import_scan (ctx.library()): a library gone meanwhile stays gone
         examples = lib.add_new(make_examples(dec.hbl, prov), stem)  # ids picked under the lock
+    if bare := bare_note(examples, named=True):
+        said = [*said, bare]
     return {"ids": [e.id for e in examples], "stats": dec.stats, "notes": said}
 
 

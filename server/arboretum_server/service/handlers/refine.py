@@ -149,7 +149,7 @@ def redo(ctx: Context, req: P.RefineRedo):
 def commit(ctx: Context, req: P.RefineCommit):
     from arboretum_library.model import Provenance
     from arboretum_server.decompose.examples import make_examples
-    from arboretum_server.decompose.notes import option_notes, scan_notes
+    from arboretum_server.decompose.notes import bare_note, option_notes, scan_notes
 
     def then(s: Session, d: RefineDraft) -> P.LibraryImported:
         dec = d.current
@@ -169,10 +169,8 @@ def commit(ctx: Context, req: P.RefineCommit):
         if same:
             said += (f"{len(same)} of {len(made)} examples are the same as {', '.join(same)} in the library; "
                      "stored again with the rest (a commit stores the whole tree)",)
-        bare = sum(not e.structure.lobes for e in made)
-        if bare:
-            said += (f"{bare} of {len(made)} examples have no lobes: "
-                     "they grow no twigs or leaves",)
+        if bare := bare_note(examples, named=True):
+            said += (bare,)
         return P.LibraryImported(ids=tuple(e.id for e in examples), stats=stats, notes=said)
 
     return _with_draft(ctx, req.session, then)
