@@ -235,3 +235,35 @@ def run_then_kill(script: str, root: Path, delay: float, on_ready=None) -> None:
         proc.send_signal(signal.SIGKILL)
         proc.wait()
         proc.stdout.close()
+
+
+def build_then_signal(folder: Path, scans: int, points: int, stop) -> tuple[int, str, Path, list[Path]]:
+    """``library build`` of ``scans`` synthetic scans of ``points`` points into ``folder``/lib, 2 workers,
+    in its own session; once its first example is stored, ``stop(proc)`` (send a signal). Returns (exit
+    code, stderr with carriage returns as newlines, the library, the scans)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from arboretum_server.batch.synthetic import synthetic_scans
+
+    paths = synthetic_scans(folder / "s", scans, points=points)
+    lib = folder / "lib"
+    argv = [sys.executable, "-m", "arboretum_library.cli", "library", "build", *map(str, paths), "--library",
+            str(lib), "--workers", "2", "--points", str(points)]
+    proc = subprocess.Popen(argv, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            env={**os.environ, "OMP_WAIT_POLICY": "PASSIVE"})
+    try:
+        t0 = time.monotonic()
+        while not (lib / "examples").is_dir() or not any((lib / "examples").iterdir()):
+            assert proc.poll() is None and time.monotonic() - t0 < 120
+            time.sleep(0.1)
+        stop(proc)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    return proc.returncode, err.decode().replace("\r", "\n"), lib, paths

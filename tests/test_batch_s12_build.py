@@ -7,8 +7,6 @@ import json
 import os
 import shutil
 import signal
-import subprocess
-import sys
 import time
 
 import numpy as np
@@ -20,6 +18,7 @@ from arboretum_library.store import Library
 from arboretum_server.batch.build import BuildOptions, build_library, species_for
 from arboretum_server.batch.tasks import NOTES_KEY, SCAN_EXAMPLES_KEY, decompose_scan
 from arboretum_server.decompose.examples import file_sha256
+from factories import build_then_signal
 
 PINE = sample_scans()[3]
 BARE = "1 of 6 examples have no lobes: they grow no twigs or leaves"
@@ -105,27 +104,8 @@ def test_sigterm_raises_terminated_once_and_waits_for_the_cluster_start():
 
 @pytest.mark.slow
 def test_sigterm_stops_the_build_with_one_line(tmp_path):
-    from arboretum_server.batch.synthetic import synthetic_scans
-
-    scans = synthetic_scans(tmp_path / "s", 10, points=1500)
-    lib = tmp_path / "lib"
-    argv = [sys.executable, "-m", "arboretum_library.cli", "library", "build", *map(str, scans), "--library",
-            str(lib), "--workers", "2", "--points", "1500"]
-    proc = subprocess.Popen(argv, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            env={**os.environ, "OMP_WAIT_POLICY": "PASSIVE"})
-    try:
-        t0 = time.monotonic()
-        while not (lib / "examples").is_dir() or not any((lib / "examples").iterdir()):
-            assert proc.poll() is None and time.monotonic() - t0 < 120
-            time.sleep(0.1)
-        proc.send_signal(signal.SIGTERM)  # kill PID, a service manager stopping it
-        _, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
-    text = err.decode().replace("\r", "\n")
-    assert proc.returncode == 143 and "Traceback" not in text and "leaked semaphore" not in text
+    code, text, lib, scans = build_then_signal(tmp_path, 10, 1500, lambda p: p.send_signal(signal.SIGTERM))  # a service manager
+    assert code == 143 and "Traceback" not in text and "leaked semaphore" not in text
     assert text.strip().endswith("arboretum library: interrupted (SIGTERM)")
     with Library.open(lib, readonly=True) as L:  # what was stored is whole: every scan all or none
         ids = [L.find_source(file_sha256(p)) for p in scans]

@@ -6,9 +6,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +18,7 @@ from arboretum_library.errors import InputError
 from arboretum_library.pointio import read_points, write_points
 from arboretum_library.pointio_text import sniff_not_points
 from arboretum_library.store import Library
-from factories import make_example
+from factories import build_then_signal, make_example
 
 QSM_HEADER = "start_x,start_y,start_z,axis_x,axis_y,axis_z,length,radius,parent,extension,branch\n"
 
@@ -343,25 +340,6 @@ def test_local_workers_ignore_sigint():
 
 @pytest.mark.slow
 def test_ctrl_c_in_the_terminal_stops_the_build_quietly(tmp_path):
-    from arboretum_server.batch.synthetic import synthetic_scans
-
-    scans = synthetic_scans(tmp_path / "s", 12, points=3000)
-    lib = tmp_path / "lib"
-    argv = [sys.executable, "-m", "arboretum_library.cli", "library", "build", *map(str, scans), "--library",
-            str(lib), "--workers", "2", "--points", "3000"]
-    proc = subprocess.Popen(argv, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            env={**os.environ, "OMP_WAIT_POLICY": "PASSIVE"})
-    try:
-        t0 = time.monotonic()
-        while not (lib / "examples").is_dir() or not any((lib / "examples").iterdir()):
-            assert proc.poll() is None and time.monotonic() - t0 < 120
-            time.sleep(0.1)
-        os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C reaches the whole process group
-        _, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
-    text = err.decode().replace("\r", "\n")
-    assert proc.returncode == 130 and "Traceback" not in text and "KeyboardInterrupt" not in text
+    code, text, _, _ = build_then_signal(tmp_path, 12, 3000, lambda p: os.killpg(p.pid, signal.SIGINT))  # Ctrl-C: the group
+    assert code == 130 and "Traceback" not in text and "KeyboardInterrupt" not in text
     assert "still alive" not in text and text.strip().endswith("arboretum library: interrupted")
