@@ -4,6 +4,7 @@ once (``--rebuild`` to replace it), and a wall turned flat by the up-axis guess 
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -82,6 +83,43 @@ def test_rebuild_replaces_and_other_options_store_beside(tmp_path, capsys):
     pine = _run(capsys, PINE, "--library", lib, "--species", "pine")  # other options: stored beside
     assert len(pine["stored"]) == 6 and len(_lobes(lib)) == 14
     assert pine["notes"][0].startswith("the library also holds 8 examples of this file made with other options")
+
+
+def test_another_up_axis_is_another_decomposition(tmp_path, capsys):
+    """helper-96's review: --up is no decomposition option, so a rerun with --up y matched the --up z
+    examples and stored nothing, exit 0, though the pine read Y up has no trunk base at all."""
+    lib = tmp_path / "L"
+    first = _run(capsys, PINE, "--library", lib, "--up", "z")["stored"]
+    assert main(["decompose", str(PINE), "--library", str(lib), "--up", "y"]) == 2  # decomposed: refused
+    assert "no trunk base" in capsys.readouterr().err and sorted(_lobes(lib)) == sorted(first)
+    again = _run(capsys, PINE, "--library", lib)  # --up auto reads it Z up: the same tree
+    assert again["already"] == first and again["stored"] == []
+
+
+def test_examples_stored_before_session_12_read_z_up(tmp_path, capsys):
+    lib = tmp_path / "L"
+    first = _run(capsys, PINE, "--library", lib)["stored"]
+    with Library.open(lib) as L:  # as an older decompose stored them: no up axis, no example count
+        for i in first:
+            e = L.get(i)
+            params = {k: v for k, v in e.provenance.parameters.items() if k not in ("up_axis", "scan_examples")}
+            L.delete(i)
+            L.add(replace(e, provenance=replace(e.provenance, parameters=params)))
+    assert _run(capsys, PINE, "--library", lib)["already"] == first
+
+
+def test_a_rebuild_stopped_half_way_is_named(tmp_path, capsys):
+    """--rebuild stores the new examples, then deletes the old ones: stopped in between, the library holds
+    both sets, and the next run says so instead of listing 16 as "already there"."""
+    lib = tmp_path / "L"
+    first = _run(capsys, PINE, "--library", lib)["stored"]
+    with Library.open(lib) as L:
+        L.add_new([L.get(i) for i in first], "10_treels_pine")  # the new set, the old one not yet deleted
+    again = _run(capsys, PINE, "--library", lib)
+    assert len(again["already"]) == 16 and again["stored"] == []
+    assert again["notes"][-1] == ("the library holds 16 examples of this file made with these options, where one "
+                                  "run makes 8 (a --rebuild stopped half-way?); --rebuild replaces them all")
+    assert len(_run(capsys, PINE, "--library", lib, "--rebuild")["replaced"]) == 16 and len(_lobes(lib)) == 8
 
 
 # ---------------------------------------------------------------- --height

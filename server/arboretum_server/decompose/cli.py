@@ -19,6 +19,7 @@ import os
 import shutil
 import time
 from contextlib import contextmanager
+from dataclasses import replace
 
 from arboretum_library.checks import check_height, check_seed
 from arboretum_library.cli import add_json_flag, counted, emit, tell
@@ -108,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
     from arboretum_library.pointio import ReadOptions, precision_note, read_points
     from arboretum_library.progress import StatusLine
 
-    from .examples import file_sha256, provenance
+    from .examples import UP_AXIS_KEY, file_sha256, provenance
     from .notes import bare_note, notes
 
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
@@ -121,11 +122,13 @@ def run(args: argparse.Namespace) -> int:
     _check_usable(args.scan, cloud, options)
     _check_up(args.scan, cloud, args.up)
     prov = provenance(args.scan, options, sha256=file_sha256(args.scan))
+    prov = replace(prov, parameters={**prov.parameters, UP_AXIS_KEY: cloud.up_axis})  # --up y is another tree
     status = StatusLine() if not args.json else (lambda *a: None)
     with _library(args.library) as lib:  # opened first: a library that cannot be written fails before the work
         there, other = _stored(lib, prov)
         if there and not args.rebuild and not args.save_hbl:  # nothing to do: no decomposition either
             data = _result(args, options, len(cloud.points), {"read": t_read}, None, ([], [], there), other)
+            data["notes"] += [surplus] if (surplus := _surplus(lib, there)) else []
             emit(args, data, _text(data))
             return 0
         dec = _decompose(args.scan, cloud, options, status)
@@ -175,12 +178,28 @@ def _stored(lib, prov) -> tuple[list[str], list[str]]:
 
     if lib is None or not prov.source_sha256:
         return [], []
+    from .examples import UP_AXIS_KEY
+
     want = json.loads(json.dumps(prov.parameters))  # as meta.json holds them
     same, other = [], []
     for id_ in sorted(lib.find_source(prov.source_sha256)):
-        params = lib.provenance(id_).parameters
+        params = {UP_AXIS_KEY: "z", **lib.provenance(id_).parameters}  # stored before session 12: read Z up
         (same if all(params.get(k) == v for k, v in want.items()) else other).append(id_)
     return same, other
+
+
+def _surplus(lib, ids: list[str]) -> str | None:
+    """A note when ``lib`` holds more examples of one scan and options (``ids``) than one run makes (a
+    ``--rebuild`` stopped between storing the new examples and deleting the old ones), else None."""
+    from .examples import SCAN_EXAMPLES_KEY
+
+    if lib is None or not ids:
+        return None
+    made = lib.provenance(ids[0]).parameters.get(SCAN_EXAMPLES_KEY)
+    if not isinstance(made, int) or len(ids) <= made:
+        return None
+    return (f"the library holds {len(ids)} examples of this file made with these options, where one run makes "
+            f"{made} (a --rebuild stopped half-way?); --rebuild replaces them all")
 
 
 def _ids(ids: list[str]) -> str:
@@ -235,7 +254,7 @@ def _store(lib, dec, scan: str, prov, rebuild: bool) -> tuple[list, list[str], l
     what it stored when a write fails or Ctrl-C comes). A scan already there is not stored again; with
     ``rebuild`` its new examples are stored, then the old ones deleted, in one hold of the lock (as
     ``library build --rebuild``: a failure keeps the old ones)."""
-    from .examples import counter_ids, make_examples
+    from .examples import SCAN_EXAMPLES_KEY, counter_ids, make_examples
 
     if lib is None:
         return make_examples(dec.hbl, prov, counter_ids("example")), [], []
@@ -244,7 +263,9 @@ def _store(lib, dec, scan: str, prov, rebuild: bool) -> tuple[list, list[str], l
         there, _ = _stored(lib, prov)
         if there and not rebuild:
             return make_examples(dec.hbl, prov, counter_ids("example")), [], there
-        examples = lib.add_new(make_examples(dec.hbl, prov), stem)
+        made = make_examples(dec.hbl, prov)
+        counted_prov = replace(prov, parameters={**prov.parameters, SCAN_EXAMPLES_KEY: len(made)})
+        examples = lib.add_new([replace(e, provenance=counted_prov) for e in made], stem)
         for id_ in there:
             if id_ in lib:
                 lib.delete(id_)

@@ -50,6 +50,14 @@ def file_sha256(path: str | Path) -> str:
     return h.hexdigest()
 
 
+SCAN_EXAMPLES_KEY = "scan_examples"
+"""Provenance parameter holding how many examples the scan gave (``library build`` tells a complete scan
+on resume by it; ``decompose`` a surplus left by an interrupted ``--rebuild``)."""
+UP_AXIS_KEY = "up_axis"
+"""Provenance parameter of ``decompose``: the file's up axis as read ('z' or 'y'; missing: 'z'). A rerun
+with another ``--up`` is another decomposition of the file."""
+
+
 def provenance(source: str | Path, options: DecomposeOptions, sha256: str | None = None) -> Provenance:
     """Provenance of examples decomposed from the file ``source`` with ``options``."""
     path = Path(source)
