@@ -6,7 +6,7 @@ Two kinds, both measured against a tenth of the cloud's height (``STRAY_APART``)
 - *lone points*: fewer than ``STRAY_NEIGHBOURS`` other points within that distance;
 - *small groups*: pieces of the cloud, cut wherever it has a gap of about that distance, holding under
   ``STRAY_GROUP`` of the points each and lying wholly below or wholly above one piece holding
-  ``TREE_SHARE`` of them or more (the tree). A cluster of 60 points 10 m under scan 07 (71,000 points)
+  ``TREE_SHARE`` of them or more (the tree), farther from it than ``STRAY_GROUP_GAP`` such distances. A cluster of 60 points 10 m under scan 07 (71,000 points)
   was its trunk base before. Pieces level with the tree are kept: they are wood behind a gap in the
   scan (a missing sector cuts limb ends off) more often than noise, and set neither base nor height.
 
@@ -32,6 +32,9 @@ STRAY_EXACT = 50_000
 STRAY_GROUP = 0.01
 """A piece of the cloud apart from the tree holding fewer than this share of the points is a stray group
 (a second tree holds more, and is the several-trees check's business)."""
+STRAY_GROUP_GAP = 2.0
+"""... and lying more than this many ``STRAY_APART`` distances (a fifth of the height) from the tree: a
+trunk's foot seen under a 2.2 m band the scan missed, on a 19 m tree, is no stray (helper-96's review)."""
 TREE_SHARE = 0.9
 """Stray groups are only looked for when one piece holds at least this share of the points."""
 
@@ -105,7 +108,18 @@ def groups(pts: np.ndarray, far: float) -> np.ndarray:
     # beside the tree a piece is wood behind a gap in the scan (a missing sector cuts limbs off), and sets
     # neither the trunk base nor the height
     outside = (high < low[tree]) | (low > high[tree])
-    return ((size < STRAY_GROUP * len(pts)) & outside)[of]
+    cand = np.flatnonzero((size < STRAY_GROUP * len(pts)) & outside)
+    if not len(cand):
+        return out
+    # a piece just under the tree is its trunk's foot below a band the scan missed (undergrowth): only a
+    # piece ``STRAY_GROUP_GAP`` x far from the tree is noise
+    from scipy.spatial import cKDTree
+
+    member = np.isin(of, cand)
+    gap = cKDTree(pts[of == tree]).query(pts[member])[0]
+    nearest = np.full(len(size), np.inf)
+    np.minimum.at(nearest, of[member], gap)
+    return (np.isin(np.arange(len(size)), cand) & (nearest > STRAY_GROUP_GAP * far))[of]
 
 
 def _packed(cells: np.ndarray) -> np.ndarray:
