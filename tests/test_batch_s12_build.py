@@ -30,6 +30,8 @@ BARE = "1 of 6 examples have no lobes: they grow no twigs or leaves"
     ("/data/Cherry_tree_07.ply", "cherry"), ("cherries-2.ply", "cherry"), ("BIRCHES.xyz", "birch"),
     ("apples_2.ply", "apple"), ("pine_pine.xyz", "pine"), ("cherry_hill_walnut_2.ply", "unknown"),
     ("/pine/x.xyz", "unknown"),  # the file name only, not its folders
+    ("OakTree_01.ply", "oak"), ("AppleTree3.laz", "apple"), ("PineScan.xyz", "pine"),  # CamelCase (the review)
+    ("PINE_01.xyz", "pine"), ("WalnutPineMix.xyz", "unknown"),
 ])
 def test_species_from_whole_words_of_the_file_name(name, species):
     assert species_for(name, None) == species

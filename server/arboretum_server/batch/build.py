@@ -138,15 +138,17 @@ def species_for(path: str, given: str | None) -> str:
 def species_guess(path: str) -> tuple[str, str]:
     """(species, note) from the file name: the species that its words name ('' note), else 'unknown'
     (with a note when it names several). Words are the runs of letters of the name without its suffix,
-    case folded, so a species inside a longer word is no species ('pinewood', 'Pinecrest', 'pineapple');
-    a plural counts ('oaks', 'birches', 'cherries')."""
+    split where a lower-case letter meets a capital ('OakTree', 'PineScan'), case folded, so a species
+    inside a longer word is no species ('pinewood', 'Pinecrest', 'pineapple'); a plural counts ('oaks',
+    'birches', 'cherries')."""
     import re
 
     from arboretum_server.decompose.options import SPECIES_COUNTS
 
     words = {form: s for s in (*SPECIES_COUNTS, *GUESSED) for form in (s, _plural(s))}
     found: list[str] = []
-    for word in re.findall(r"[^\W\d_]+", Path(path).stem.casefold()):
+    camel = re.sub(r"(?<=[a-z])(?=[A-Z])", " ", Path(path).stem)  # OakTree_01: Oak, Tree
+    for word in re.findall(r"[^\W\d_]+", camel.casefold()):
         if word in words and words[word] not in found:
             found.append(words[word])
     if len(found) == 1:
