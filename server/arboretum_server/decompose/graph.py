@@ -64,9 +64,10 @@ def knn_graph(points: np.ndarray, k: int, radius: float) -> Graph:
 
 def gap_graph(points: np.ndarray, g: Graph, radius: float) -> csr_matrix | None:
     """``g``'s adjacency (N, N) with every edge across a scan gap ``SHORTCUT_COST`` times its length:
-    the bridges, and, between every two components (before bridging) whose boxes lie within
-    ``SHORTCUT_REACH`` x ``radius``, an edge from each point of the smaller one to its nearest point of
-    the other within that reach. None for a graph of one component.
+    the bridges, and, between every two components (before bridging; past ``MAX_PAIRS_COMPONENTS`` or
+    ``QUERY_BUDGET``, every two big ones: ``_near_pairs``) whose boxes lie within ``SHORTCUT_REACH`` x
+    ``radius``, an edge from each point of the smaller one to its nearest point of the other within that
+    reach. None for a graph of one component.
 
     The bridges of ``knn_graph`` join each component by its globally shortest edges, which can hang a
     trunk's upper part off a neighbouring limb where a scan gap cuts it from the fork below: the path to
