@@ -120,7 +120,68 @@ def test_integer_ply_resolution_is_one_unit(tmp_path, tree):
     cloud = read_points(_ply(tmp_path / "mm.ply", np.round(tree * 100), "i4"), Z)  # centimetres
     assert (cloud.resolution, cloud.stored_as) == (1.0, "int32")
     assert precision_note(cloud, spacing=9.0) == (
-        f"'{tmp_path / 'mm.ply'}': coordinates stored as int32 at magnitudes up to 2.58e+04 m are only 1 m "
-        "apart, coarser than a tenth of the median point spacing (9 m): the points sit on that grid; "
-        "re-export it as float64")
+        f"'{tmp_path / 'mm.ply'}': coordinates stored as int32 are only 1 m apart, coarser than a tenth of the "
+        "median point spacing (9 m): the points sit on that grid; re-export it as float64")
     assert precision_note(cloud, spacing=10.0) is None
+
+
+# ---------------------------------------------------------------- false positives (helper-96's review)
+
+
+@pytest.fixture(scope="module")
+def dense_las(tmp_path_factory):
+    """/tmp/h96/las_note.py: a 0.15 m trunk 10 m tall, 400,000 points (2.24 mm apart) at UTM, 1 mm scale."""
+    rng = np.random.default_rng(0)
+    n = 400_000
+    z, a = rng.uniform(0, 10, n), rng.uniform(0, 2 * np.pi, n)
+    pts = np.c_[0.15 * np.cos(a), 0.15 * np.sin(a), z] + [512345.0, 5412345.0, 300.0]
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales, header.offsets = [0.001] * 3, [512000, 5412000, 0]
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = pts.T
+    path = tmp_path_factory.mktemp("las") / "trunk.las"
+    las.write(str(path))
+    return read_points(path, Z)
+
+
+def test_dense_las_with_a_1mm_scale_has_no_note_at_the_decomposition_budget(dense_las):
+    """Before: the note at any budget (2.24 mm over all points); at 12,000 points they are 13 mm apart."""
+    assert precision_note(dense_las, points=12_000) is None
+
+
+def test_las_note_is_worded_by_its_scale_factor(dense_las):
+    """Over all points (None or 0) the 1 mm grid is coarser than 0.224 mm; no UTM magnitude is named."""
+    path = dense_las.source
+    for points in (None, 0):
+        assert precision_note(dense_las, points=points) == (
+            f"'{path}': coordinates stored as LAS integers scaled by 0.001 are only 1 mm apart, coarser than a "
+            "tenth of the median point spacing (2.24 mm): the points sit on that grid; re-export it with a finer "
+            "scale factor, or as float64 PLY")
+    assert precision_note(dense_las) == precision_note(dense_las, points=None)  # the callers' old call
+    note = precision_note(dense_las, points=100_000)
+    assert note is not None and "(4.47 mm at 100,000 points)" in note
+
+
+def test_every_point_given_twice_gives_no_note(tmp_path, tree):
+    """/tmp/h96/dup_note.py: float32 near the origin (0.24 um grid), two exports merged. Before: median
+    spacing 0, so any grid was 'coarser'."""
+    pts = tree - tree.min(axis=0)
+    cloud = read_points(_ply(tmp_path / "dup.ply", np.r_[pts, pts], "f4"), Z)
+    assert cloud.resolution == 2.0**-22
+    assert precision_note(cloud) is None
+    assert precision_note(cloud, points=12_000) is None
+
+
+def test_one_distinct_point_gives_no_note():
+    """(read_points refuses such a file; a cloud built in memory may hold it.)"""
+    cloud = PointCloud(points=np.tile(UTM, (50, 1)), resolution=0.5, stored_as="float32")
+    assert precision_note(cloud) is None
+    assert precision_note(cloud, points=12_000) is None
+
+
+def test_float32_utm_note_at_the_budget_names_it(tmp_path, tree):
+    cloud = read_points(_ply(tmp_path / "utm.ply", tree + UTM, "f4"), Z)
+    note = precision_note(cloud, points=12_000)
+    assert note is not None and "at magnitudes up to 5.4e+06 m are only 0.5 m apart" in note
+    assert " at 12,000 points): the points sit on that grid" in note
+    assert note == precision_note(cloud, points=12_000)  # seeded

@@ -71,12 +71,75 @@ def test_trailing_delimiter_on_header_and_rows(tmp_path, pts):
     np.testing.assert_array_equal(read_points(path, Z).points, pts)
 
 
-def test_header_naming_xyz_never_falls_back_to_the_first_columns(tmp_path, pts):
-    """Before: a count mismatch read columns 1-3 silently (here (7, x, y))."""
+def test_header_naming_xyz_first_reads_those_columns_over_wider_rows(tmp_path, pts):
+    """The header says x is the first column: it is, though a constant (not row names: they differ)."""
     path = _write(tmp_path / "m.csv", "x,y,z", [f"7,{_values(p)}" for p in pts])
-    with pytest.raises(InputError, match=r"m\.csv': its header names 3 columns \(x, y, z\) but its rows "
-                                         r"hold 4 values: cannot tell which columns are x, y and z"):
+    np.testing.assert_array_equal(read_points(path, Z).points, np.c_[np.full(len(pts), 7.0), pts[:, :2]])
+
+
+# Over-wide rows (helper-96's review of session 12, /tmp/h96/csv): refused with "its header names 3 columns
+# (x, y, z) but its rows hold 4 values", read as x, y, z before session 12.
+
+
+def test_xyz_header_over_rows_with_an_intensity(tmp_path, pts):
+    rows = [f"{_values(p, ' ')} {i % 500}" for i, p in enumerate(pts)]
+    for name, header in (("i.txt", "x y z"), ("cc.txt", "//X Y Z"), ("c.csv", "x,y,z")):
+        cloud = read_points(_write(tmp_path / name, header, rows if name != "c.csv" else
+                                   [r.replace(" ", ",") for r in rows]), Z)
+        np.testing.assert_array_equal(cloud.points, pts, err_msg=name)
+        assert cloud.colors is None
+
+
+def test_xyz_header_over_rows_with_three_more_columns(tmp_path, pts):
+    """Unnamed trailing columns in 0..255 are no colours under a header naming x, y, z."""
+    path = _write(tmp_path / "w.txt", "x y z", [f"{_values(p, ' ')} 10 20 30" for p in pts])
+    cloud = read_points(path, Z)
+    np.testing.assert_array_equal(cloud.points, pts)
+    assert cloud.colors is None
+
+
+def test_tab_separated_header_names_may_hold_spaces(tmp_path, pts):
+    rows = [f"{_values(p, chr(9))}\t{i}" for i, p in enumerate(pts)]
+    path = _write(tmp_path / "t.txt", "x\ty\tz\tpoint id", rows)
+    np.testing.assert_array_equal(read_points(path, Z).points, pts)
+    path = _write(tmp_path / "t2.txt", "point id\tx\ty\tz", [f"{i}\t{_values(p, chr(9))}" for i, p in enumerate(pts)])
+    np.testing.assert_array_equal(read_points(path, Z).points, pts)
+
+
+def test_r_write_table_after_its_rows_were_reordered(tmp_path, pts, rng):
+    """Quoted row names are row names in any order. Before: refused as 3 names over 4 values."""
+    order = rng.permutation(len(pts)) + 1
+    rows = [f'"{k}" {_values(p, " ")}' for k, p in zip(order, pts)]
+    path = _write(tmp_path / "r.txt", '"x" "y" "z"', rows)
+    np.testing.assert_array_equal(read_points(path, Z).points, pts)
+
+
+def test_unquoted_rising_row_numbers_under_a_header_one_short(tmp_path, pts):
+    """R's write.table(quote=FALSE): the rising whole numbers are row names, as in session 12."""
+    path = _write(tmp_path / "u.txt", "x y z", [f"{2 * i + 1} {_values(p, ' ')}" for i, p in enumerate(pts)])
+    np.testing.assert_array_equal(read_points(path, Z).points, pts)
+
+
+def test_unquoted_reordered_row_numbers_under_a_header_one_short_are_refused(tmp_path, pts, rng):
+    order = rng.permutation(len(pts)) + 1
+    path = _write(tmp_path / "a.txt", "x y z", [f"{k} {_values(p, ' ')}" for k, p in zip(order, pts)])
+    with pytest.raises(InputError, match=r"a\.txt': its header names 3 columns \(x, y, z\) over rows of 4 values, "
+                                         r"and its first column holds distinct whole numbers out of order: row names "
+                                         r"\(R's write.table\) or data\? Name every column in the header"):
         read_points(path, Z)
+
+
+def test_xyz_named_past_the_last_column_is_refused(tmp_path, pts):
+    """Blank-separated names with a space ('point id') split in two: z would be the 5th of 4 columns."""
+    path = _write(tmp_path / "p.txt", "point id x y z", [f"{i} {_values(p, ' ')}" for i, p in enumerate(pts)])
+    with pytest.raises(InputError, match=r"p\.txt': its header names z as column 5 but its rows hold 4 values "
+                                         r"\(header: point, id, x, y, z\); cannot tell which columns are x, y and z"):
+        read_points(path, Z)
+
+
+def test_header_longer_than_the_rows_past_xyz_reads_them(tmp_path, pts):
+    path = _write(tmp_path / "l.txt", "x y z intensity", [_values(p, " ") for p in pts])
+    np.testing.assert_array_equal(read_points(path, Z).points, pts)
 
 
 def test_header_naming_some_of_xyz_out_of_place_is_refused(tmp_path, pts):

@@ -117,9 +117,10 @@ def check_labels(path: Path, labels: np.ndarray, name: str = "label") -> None:
 
 
 def from_table(
-    path: Path, table: np.ndarray, names: list[str] | None = None, rgb_at: int = 3
+    path: Path, table: np.ndarray, names: list[str] | None = None, rgb_at: int = 3, quoted_first: bool = False
 ) -> Raw:
-    """A ``Raw`` cloud from an (N, C>=3) table; ``names`` from a header, if any (``header_columns``).
+    """A ``Raw`` cloud from an (N, C>=3) table; ``names`` from a header, if any (``header_columns``);
+    ``quoted_first``: the file quoted the first value of its rows and not the next (R's row names).
 
     A header naming x, y and z names the colours too: only named colour columns count (a PDAL CSV's
     Intensity, ReturnNumber, NumberOfReturns are no colours). A header naming some of x, y, z never
@@ -129,7 +130,7 @@ def from_table(
     """
     raw: Raw = {"points": table[:, :3]}
     if names is not None and any(k in names for k in "xyz"):
-        names = header_columns(path, names, table)
+        names = header_columns(path, names, table, quoted_first)
         if all(k in names for k in "xyz"):
             return from_named(path, dict(zip(names, table.T)))
         misplaced = [k for i, k in enumerate("xyz") if k in names and names.index(k) != i]
@@ -143,31 +144,47 @@ def from_table(
     return raw
 
 
-def header_columns(path: Path, names: list[str], table: np.ndarray) -> list[str]:
-    """The header ``names`` one per column of ``table``, or InputError when they cannot be matched.
+def header_columns(path: Path, names: list[str], table: np.ndarray, quoted_first: bool = False) -> list[str]:
+    """The header ``names`` one per column of ``table`` (``''``: unnamed), or InputError when x, y or z
+    cannot be placed.
 
-    Empty names after the last column (a delimiter ending the header line) are dropped. One name short,
-    with a first column of row numbers (whole numbers, rising: R's ``write.table`` writes no name over
-    its row names, which rise by more than 1 after rows were dropped), the first column is taken as
-    unnamed. Any other mismatch is refused: before
-    session 12 it fell back to the first three columns, and a file with an index column was read as
-    (index, x, y)."""
+    Empty names after the last column (a delimiter ending the header line) are dropped. A header short
+    of names over a first column of row names gets an unnamed first column (``_row_names``). Then
+    columns past the names are unnamed (``x y z`` over rows with an intensity: read as x, y, z, the
+    rest ignored, as before session 12) and names past the columns are dropped, unless they name x, y
+    or z: that is refused, as is a header whose shift is ambiguous."""
     ncols = table.shape[1]
     names = list(names)
     while len(names) > ncols and names[-1] == "":
         names.pop()
-    if len(names) == ncols - 1 and _row_numbers(table[:, 0]):
+    if len(names) < ncols and _row_names(path, names, table, quoted_first):
         names.insert(0, "")
-    if len(names) != ncols:
-        raise fail(path, f"its header names {len(names)} columns ({_shown(names)}) but its rows hold {ncols} "
-                         "values: cannot tell which columns are x, y and z")
-    return names
+    lost = [k for k in "xyz" if k in names[ncols:] and k not in names[:ncols]]
+    if lost:
+        where = ", ".join(f"{k} as column {names.index(k) + 1}" for k in lost)
+        raise fail(path, f"its header names {where} but its rows hold {ncols} values (header: {_shown(names)}); "
+                         "cannot tell which columns are x, y and z")
+    return names[:ncols] + [""] * (ncols - len(names))
 
 
-def _row_numbers(column: np.ndarray) -> bool:
-    """Whether ``column`` holds row numbers: whole numbers, each larger than the one before (no scan
-    coordinate does: sorted or not, some repeat or fall)."""
-    return bool((column == np.round(column)).all() and (np.diff(column) > 0).all())
+def _row_names(path: Path, names: list[str], table: np.ndarray, quoted: bool) -> bool:
+    """Whether the first column of ``table``, whose header ``names`` are too few, holds row names, which
+    R's ``write.table`` writes with no name over them: quoted (R quotes them, never numbers), or, one
+    name short, whole numbers rising (``quote=FALSE``; by more than 1 after rows were dropped). One
+    name short over distinct whole numbers that fall somewhere (unquoted row names of reordered rows,
+    or x values?) is refused. Anything else is data (x of ``x y z`` over rows with an intensity)."""
+    column = table[:, 0]
+    if quoted:
+        return True
+    if len(names) != table.shape[1] - 1 or not (column == np.round(column)).all():
+        return False
+    if len(column) > 1 and (np.diff(column) > 0).all():
+        return True
+    if column.min() >= 0 and np.unique(column).size == column.size:
+        raise fail(path, f"its header names {len(names)} columns ({_shown(names)}) over rows of "
+                         f"{table.shape[1]} values, and its first column holds distinct whole numbers out of order: "
+                         "row names (R's write.table) or data? Name every column in the header")
+    return False
 
 
 def _shown(names: list[str], limit: int = 8) -> str:

@@ -30,11 +30,12 @@ def _is_number(token: bytes) -> bool:
 
 def _header_names(line: bytes) -> list[str]:
     """The lower-case column names of a header line, split at its commas, else its semicolons, else its
-    blanks, quotes removed. An empty name stays, as ``''``: the unnamed row-index column that pandas
-    (``,x,y,z``) and R's ``write.csv`` (``"","X","Y","Z"``) write first. Dropped, it shifted every name
-    one column left and the cloud was read as (index, x, y)."""
+    tabs (a name may hold spaces: ``point id``), else its blanks, quotes removed. An empty name stays, as
+    ``''``: the unnamed row-index column that pandas (``,x,y,z``) and R's ``write.csv``
+    (``"","X","Y","Z"``) write first. Dropped, it shifted every name one column left and the cloud was
+    read as (index, x, y)."""
     text = line.decode("utf-8", "replace").strip().lstrip("/#").strip()
-    sep = r"," if "," in text else r";" if ";" in text else r"\s+"
+    sep = r"," if "," in text else r";" if ";" in text else r"\t" if "\t" in text else r"\s+"
     return [t.strip().strip("\"'").strip().lower() for t in re.split(sep, text)]
 
 
@@ -62,7 +63,7 @@ def read_text(path: Path) -> Raw:
         f.seek(bom + sum(len(ln) for ln in lines[:start]))
         table = parse_table(path, f, start + 1)
     rgb_at = 4 if path.suffix.lower() == ".pts" and table.shape[1] == 7 else 3
-    raw = from_table(path, table, names, rgb_at)
+    raw = from_table(path, table, names, rgb_at, _quoted_first(lines[start : start + ROWS_CHECKED]))
     raw["resolution"], raw["stored_as"] = 0.0, "text"  # decimals as written: no type rounds them
     return raw
 
@@ -81,6 +82,21 @@ def find_header(lines: list[bytes]) -> tuple[list[str] | None, int | None, int]:
             return names, i, len(tokens)
         names = _header_names(s)
     return names, None, 0
+
+
+def _quoted_first(rows: list[bytes]) -> bool:
+    """Whether every data row of ``rows`` (the first ones) has its first value in double quotes and the
+    next not: R's row names, which ``write.table`` quotes (numbers never), in any order once the rows
+    were reordered."""
+    seen = 0
+    for row in rows:
+        tokens = [t for t in re.split(rb"[,;\s]+", row.split(b"#", 1)[0].strip()) if t]
+        if not tokens:
+            continue
+        if len(tokens) < 2 or not tokens[0].startswith(b'"') or tokens[1].startswith(b'"'):
+            return False
+        seen += 1
+    return seen > 0
 
 
 UTF8_BOM = b"\xef\xbb\xbf"
