@@ -137,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
         stored = _store(lib, dec, args.scan, prov, args.rebuild)
     data = _result(args, options, len(cloud.points), {"read": t_read, **dec.timing}, dec, stored, other)
     bare = bare_note(stored[0], named=bool(stored[1]))  # library ids name them; example-000 would not
-    coarse = precision_note(cloud)  # float32 at UTM magnitudes: the points sit on a 0.5 m grid
+    coarse = precision_note(cloud, points=options.points)  # float32 at UTM: the points sit on a 0.5 m grid
     data["notes"] = ([coarse] if coarse else []) + notes(options, dec.stats) + data["notes"] + ([bare] if bare else [])
     emit(args, data, _text(data))
     return 0
