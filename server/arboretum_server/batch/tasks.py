@@ -131,7 +131,8 @@ def _decompose(path: str, sha256: str, options: dict[str, Any], t0: float) -> Sc
     if not examples:
         return _failed(path, sha256, "decomposition gave no examples (no main branch found)", t0)
     said = result_notes(opts, dec.stats)  # the species note would repeat for every scan of a species
-    said = ([coarse] if (coarse := precision_note(cloud, points=opts.points)) else []) + said  # the file's own precision
+    coarse = precision_note(cloud, points=opts.points)  # the file's own precision: kept with the notes
+    said = ([coarse] if coarse else []) + said
     params = {**prov.parameters, SCAN_EXAMPLES_KEY: len(examples), NOTES_KEY: list(said)}
     # examples without lobes: said when made, not stored with the notes (the user may delete those
     # examples, and a rerun would repeat a stale count); placeholder ids, so none named
