@@ -208,6 +208,11 @@ class Library(LibraryWrites):
         """Ids of the examples decomposed from the scan with this content hash."""
         return self._read(lambda con: catalog.with_source(con, source_sha256.lower()))
 
+    def find_content(self, hashes: Iterable[str], source: str, species: str) -> dict[str, str]:
+        """For each of ``hashes`` (SHA-256 of an arrays.npz, ``Entry.content_sha256``) stored under this
+        source name and species, the lowest id holding it (one catalog query, no rows loaded)."""
+        return self._read(lambda con: catalog.with_content(con, [h.lower() for h in hashes], source, species))
+
     def info(self) -> dict:
         """Counts per species and tag, number of examples, bytes of example folders."""
         info = self._read(catalog.summary)

@@ -3,6 +3,8 @@ merge / split lobe, undo, redo, commit to the library. The operations are ``deco
 
 Every edit is journaled (``refine_store``) before the reply; after a restart the first refinement
 request of a session rebuilds its draft in a worker (decompose again, replay the edits) and then runs.
+A draft made by a server of another ``refine_store.DECOMPOSE_VERSION`` is not rebuilt (each request says
+so; its files are kept); a replay that fails at an edit keeps the draft as it was before that edit.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from arboretum_library import protocol as P
-from arboretum_library.errors import InputError
+from arboretum_library.errors import ArboretumError, InputError
 from arboretum_server.service import refine_store
 from arboretum_server.service.context import Context
 from arboretum_server.service.handlers.assembly import checked_strokes
@@ -44,17 +46,28 @@ def apply_edit(dec: Any, kind: str, args: dict) -> Any:
 
 def decompose_job(progress, points: np.ndarray, labels: np.ndarray | None, species: str, options: dict,
                   edits: tuple = ()) -> dict:
-    """Worker: decompose ``points`` and replay ``edits``; the draft's states, index and revision."""
+    """Worker: decompose ``points`` and replay ``edits``; the draft's states, index and revision, and
+    ``failed``: None, or the edit the replay stopped at (``done`` edits before it were replayed)."""
     from arboretum_server.decompose.pipeline import decompose
 
     lab = labels if labels is not None and len(labels) else None
     draft = RefineDraft([decompose(points, options_from(species, options), progress, labels=lab)])
-    for e in edits:
-        if e["kind"] in ("undo", "redo"):
-            draft.move(-1 if e["kind"] == "undo" else 1)
-        else:
-            draft.push(apply_edit(draft.current, e["kind"], e["args"]))
-    return {"states": draft.states, "index": draft.index, "revision": draft.revision}
+    failed = None
+    for done, e in enumerate(edits):
+        try:
+            _replay(draft, e)
+        except Exception as exc:  # any failure: keep the edits before it, not lose them all
+            why = str(exc) if isinstance(exc, ArboretumError) else f"{type(exc).__name__}: {exc}"
+            failed = {"done": done, "kind": e["kind"], "error": why}
+            break
+    return {"states": draft.states, "index": draft.index, "revision": draft.revision, "failed": failed}
+
+
+def _replay(draft: RefineDraft, e: dict) -> None:
+    if e["kind"] in ("undo", "redo"):
+        draft.move(-1 if e["kind"] == "undo" else 1)
+    else:
+        draft.push(apply_edit(draft.current, e["kind"], e["args"]))
 
 
 def _state(d: RefineDraft) -> P.RefineState:
@@ -76,12 +89,24 @@ def _with_draft(ctx: Context, session_id: str, then: Callable[[Session, RefineDr
         ctx.sessions.still_open(s)
         if s.refine is not None:  # another request rebuilt it meanwhile: keep that one
             return then(s, s.refine)
-        s.refine = RefineDraft(r["states"], r["index"], src.name, src.species, r["revision"], src.generation)
+        failed, kept = r.get("failed"), src
+        if failed:
+            kept = refine_store.keep_first(ctx.sessions.dir(), s.id, src, failed["done"], ctx.sessions.fsync)
+        s.refine = RefineDraft(r["states"], r["index"], src.name, src.species, r["revision"], kept.generation)
+        if failed:  # the request was meant for the whole draft: not run on the shorter one
+            raise InputError(_replay_failed(failed, len(edits)))
         return then(s, s.refine)
 
     kwargs = {"points": src.points, "labels": src.labels, "species": src.species, "options": src.options,
               "edits": tuple(edits)}
     return Job(f"{__name__}:decompose_job", kwargs, finish)
+
+
+def _replay_failed(failed: dict, total: int) -> str:
+    n = failed["done"]
+    return (f"the saved refinement draft could not be rebuilt past edit {n + 1} of {total} ({failed['kind']}: "
+            f"{failed['error']}); it was kept as it was before that edit ({n} edit{'s' * (n != 1)} replayed, "
+            f"{total - n} dropped); this request was not run: send it again if it still applies")
 
 
 def open_scan(ctx: Context, req: P.RefineOpen) -> Job:
@@ -158,13 +183,14 @@ def commit(ctx: Context, req: P.RefineCommit):
         stats = {"lobes": len(dec.lobes)}
         prov = Provenance(d.name, "", dec.options.species, dec.options.as_dict())
         made = make_examples(dec.hbl, prov)
-        found = stored_copies(lib, made, prov)
-        if made and all(found):
-            ids = tuple(i for i in found if i)
-            return P.LibraryImported(ids=ids, stats=stats, notes=said + (
-                f"this draft {P.ALREADY_COMMITTED}, unchanged since, as {_span(ids)}: not stored again",))
+        hashes = content_hashes(made)
+        if made and all(found := _copies(lib, hashes, prov)):  # no lock to answer a repeated commit
+            return _committed_already(found, said, stats)
         stem = "".join(c if c.isalnum() or c in "-_" else "-" for c in d.name)[:60] or "scan"
-        examples = lib.add_new(made, stem)  # ids picked under the lock
+        with lib.locked():  # looked up again with the add: no other writer stores the tree in between
+            if made and all(found := _copies(lib, hashes, prov)):
+                return _committed_already(found, said, stats)
+            examples = lib.add_new(made, stem)  # ids picked under the lock
         same = [i for i in found if i]
         if same:
             said += (f"{len(same)} of {len(made)} examples are the same as {', '.join(same)} in the library; "
@@ -176,19 +202,31 @@ def commit(ctx: Context, req: P.RefineCommit):
     return _with_draft(ctx, req.session, then)
 
 
+def _committed_already(found: list, said: tuple, stats: dict) -> P.LibraryImported:
+    ids = tuple(i for i in found if i)
+    return P.LibraryImported(ids=ids, stats=stats, notes=said + (
+        f"this draft {P.ALREADY_COMMITTED}, unchanged since, as {_span(ids)}: not stored again",))
+
+
 def stored_copies(lib: Any, made: list, prov: Any) -> list[str | None]:
     """For each example of ``made``, the id of one in ``lib`` identical to it, or None.
 
     Identical: the same arrays (the catalog's ``content_sha256``, the SHA-256 of arrays.npz, which holds
     no id, time or provenance: the same tree hashes alike under any id and after a restart) and the same
     source name and species. The lowest such id is given (an earlier server stored copies)."""
+    return _copies(lib, content_hashes(made), prov)
+
+
+def content_hashes(made: list) -> list[str]:
+    """The ``content_sha256`` each example of ``made`` will have in the library."""
     from arboretum_library.folders import encode
 
-    by_hash: dict[str, str] = {}
-    for e in lib.entries(species=prov.species):  # by id
-        if e.source == prov.source:
-            by_hash.setdefault(e.content_sha256, e.id)
-    return [by_hash.get(json.loads(encode(ex)[0])["arrays_sha256"]) for ex in made]
+    return [json.loads(encode(ex)[0])["arrays_sha256"] for ex in made]
+
+
+def _copies(lib: Any, hashes: list[str], prov: Any) -> list[str | None]:
+    by_hash = lib.find_content(hashes, prov.source, prov.species)  # one query on the species' rows
+    return [by_hash.get(h) for h in hashes]
 
 
 def _span(ids: tuple[str, ...]) -> str:

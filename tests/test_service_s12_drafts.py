@@ -1,0 +1,175 @@
+"""Saved refinement drafts after an upgrade (helper-96's review): a draft records the decomposition version
+it was made with and is not replayed by a server of another one (each request says so; its files are
+kept); a replay failing at an edit keeps the edits before it and names the one that failed; a torn
+journal tail is dropped so later edits are read back."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field, fields, replace
+
+import numpy as np
+import pytest
+
+from arboretum_library import protocol as P
+from arboretum_library.codec import load_record, save_record
+from arboretum_library.store import Library
+from arboretum_server.service import refine_store
+from arboretum_server.service.refine_store import DECOMPOSE_VERSION, RefineSource
+from factories import dispatcher, reply_of
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+ok = reply_of
+OPTIONS = {"n_main": 3, "n_lobes": 5, "points": 4000}
+
+
+@pytest.fixture
+def folders(tmp_path):
+    Library.open(tmp_path / "lib", create=True).close()
+    return tmp_path / "state", tmp_path / "lib"
+
+
+def toy() -> tuple[np.ndarray, np.ndarray]:
+    from arboretum_server.decompose.toytree import toy_scan, toy_truth
+
+    return toy_scan(toy_truth(), n=4000, seed=2)
+
+
+def open_draft(server) -> str:
+    pts, labels = toy()
+    sid = ok(server, P.SessionNew()).session
+    ok(server, P.RefineOpen(session=sid, points=pts, labels=labels, name="toy", options=OPTIONS))
+    return sid
+
+
+def refine_files(folders, sid: str) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted((folders[0] / "sessions").glob(f"{sid}.refine.*"))}
+
+
+def error_of(server, req) -> P.Error:
+    reply = server.run(req)
+    assert isinstance(reply, P.Error), reply
+    return reply
+
+
+@dataclass(frozen=True, eq=False)
+class OldSource:
+    """``RefineSource`` as session 11 wrote it: no ``version``."""
+
+    points: np.ndarray
+    labels: np.ndarray
+    name: str = "scan"
+    species: str = "unknown"
+    options: dict = field(default_factory=dict)
+    generation: str = ""
+
+
+OldSource.__name__ = "RefineSource"  # the record kind the file names
+
+
+def save_as_version(path, version: int) -> None:
+    src = load_record(path, RefineSource)
+    if version == 1:  # written before versions were recorded: no field at all
+        save_record(path, OldSource(**{f.name: getattr(src, f.name) for f in fields(OldSource)}))
+    else:
+        save_record(path, replace(src, version=version))
+
+
+# -- 1. a draft of another decomposition version -------------------------------------------------------
+def test_a_new_draft_records_the_running_version(folders):
+    with dispatcher(*folders) as server:
+        sid = open_draft(server)
+    assert DECOMPOSE_VERSION == 2
+    assert load_record(folders[0] / "sessions" / f"{sid}.refine.npz", RefineSource).version == 2
+
+
+@pytest.mark.parametrize("version, made", [(1, "an older"), (3, "a newer")])
+def test_a_draft_of_another_version_is_not_replayed_and_its_files_are_kept(folders, version, made):
+    with dispatcher(*folders) as server:
+        sid = open_draft(server)
+        ok(server, P.RemoveLobe(session=sid, lobe=0))
+    save_as_version(folders[0] / "sessions" / f"{sid}.refine.npz", version)
+    before = refine_files(folders, sid)
+    assert sorted(before) == [f"{sid}.refine.journal", f"{sid}.refine.npz"]
+    said = (f"the refinement draft of session {sid} was made by {made} Arboretum (decomposition version "
+            f"{version}; this server's is 2), which decomposes and splits differently, so it cannot be rebuilt "
+            f"exactly; its files ({sid}.refine.npz, {sid}.refine.journal) are kept; refine.open of the scan "
+            "again starts over")
+    with dispatcher(*folders) as server:  # HEAD: replayed the edit on today's tree and answered
+        for req in (P.RefinePoints(session=sid), P.RemoveLobe(session=sid, lobe=0), P.RefineUndo(session=sid),
+                    P.RefineCommit(session=sid), P.RefinePoints(session=sid)):
+            err = error_of(server, req)
+            assert (err.code, err.message) == ("bad_input", said)
+        assert ok(server, P.LibraryList()).entries == ()
+        assert refine_files(folders, sid) == before  # nothing rewritten, nothing deleted
+        pts, labels = toy()
+        state = ok(server, P.RefineOpen(session=sid, points=pts, labels=labels, name="toy", options=OPTIONS))
+        assert state.revision == 0 and not state.can_undo  # started over
+        assert ok(server, P.RemoveLobe(session=sid, lobe=0)).revision == 1
+    assert load_record(folders[0] / "sessions" / f"{sid}.refine.npz", RefineSource).version == 2
+
+
+# -- 2. a replay that fails at an edit -----------------------------------------------------------------
+def repeated_strokes(cloud: P.RefineCloud, lobe: int) -> dict:
+    """Two strokes over the same three points of ``lobe``: accepted before session 12, refused now."""
+    stroke = cloud.points[cloud.lobe_of == lobe][:3]
+    sp, sz = P.pack_strokes([stroke, stroke])
+    return {"stroke_points": sp, "stroke_sizes": sz}
+
+
+def test_a_replay_failing_at_an_edit_keeps_the_edits_before_it(folders):
+    with dispatcher(*folders) as server:
+        sid = open_draft(server)
+        ok(server, P.RemoveLobe(session=sid, lobe=0))
+        kept = ok(server, P.RefinePoints(session=sid))
+        arrays = repeated_strokes(kept, 0)
+        refused = error_of(server, P.SplitLobe(session=sid, lobe=0, seed=0, **arrays)).message
+    folder = folders[0] / "sessions"
+    gen = load_record(folder / f"{sid}.refine.npz", RefineSource).generation
+    refine_store.append(folder, sid, gen, "split_lobe", {"lobe": 0, "seed": 0}, arrays)  # an older server's
+    refine_store.append(folder, sid, gen, "undo", {})
+    journal = (folder / f"{sid}.refine.journal").read_bytes()
+    with dispatcher(*folders) as server:  # HEAD: every request failed with the split's error
+        err = error_of(server, P.RefinePoints(session=sid))
+        assert err.code == "bad_input"
+        assert err.message == (f"the saved refinement draft could not be rebuilt past edit 2 of 3 (split_lobe: "
+                               f"{refused}); it was kept as it was before that edit (1 edit replayed, 2 dropped); "
+                               "this request was not run: send it again if it still applies")
+        now = ok(server, P.RefinePoints(session=sid))
+        assert np.array_equal(now.lobe_of, kept.lobe_of) and np.array_equal(now.points, kept.points)
+        assert ok(server, P.MergeLobes(session=sid, lobes=(0, 1))).revision == 2
+        merged = ok(server, P.RefinePoints(session=sid))
+    assert (folder / f"{sid}.refine.journal").read_bytes().startswith(journal)  # the old entries are kept
+    with dispatcher(*folders) as server:  # rebuilt again, without error: the kept edit and the new one
+        again = ok(server, P.RefinePoints(session=sid))
+        assert np.array_equal(again.lobe_of, merged.lobe_of)
+        undone = ok(server, P.RefineUndo(session=sid))
+        assert undone.revision == 3 and undone.can_undo  # two edits replayed
+        assert np.array_equal(ok(server, P.RefinePoints(session=sid)).lobe_of, kept.lobe_of)
+
+
+def test_decompose_job_reports_the_edit_it_stopped_at():
+    from arboretum_server.service.handlers.refine import decompose_job
+
+    pts, labels = toy()
+    edits = ({"kind": "remove_lobe", "args": {"lobe": 0}}, {"kind": "merge_lobes", "args": {"lobes": [0, 99]}},
+             {"kind": "undo", "args": {}})
+    r = decompose_job(lambda *a: None, pts, labels, "unknown", OPTIONS, edits)
+    assert (len(r["states"]), r["index"], r["revision"]) == (2, 1, 1)
+    assert r["failed"]["done"] == 1 and r["failed"]["kind"] == "merge_lobes" and "99" in r["failed"]["error"]
+
+
+# -- 3. a torn journal tail ---------------------------------------------------------------------------
+def test_edits_after_a_torn_journal_tail_are_read_back(folders):
+    with dispatcher(*folders) as server:
+        sid = open_draft(server)
+        ok(server, P.RemoveLobe(session=sid, lobe=0))
+    with open(folders[0] / "sessions" / f"{sid}.refine.journal", "ab") as fh:
+        fh.write(b"\x40\x00\x00")  # a kill during an append
+    with dispatcher(*folders) as server:
+        assert ok(server, P.RemoveLobe(session=sid, lobe=0)).revision == 2
+        two = ok(server, P.RefinePoints(session=sid))
+    with dispatcher(*folders) as server:  # HEAD: the second edit was behind the torn bytes, unread
+        assert np.array_equal(ok(server, P.RefinePoints(session=sid)).lobe_of, two.lobe_of)
+        assert ok(server, P.RefineUndo(session=sid)).revision == 3
