@@ -267,3 +267,41 @@ def build_then_signal(folder: Path, scans: int, points: int, stop) -> tuple[int,
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
     return proc.returncode, err.decode().replace("\r", "\n"), lib, paths
+
+
+TOY_DRAFT_OPTIONS = {"n_main": 3, "n_lobes": 5, "points": 4000}
+"""Options of the refinement drafts the service tests open on the toy tree (3 main branches, 5 lobes)."""
+
+
+def service_folders(tmp_path: Path) -> tuple[Path, Path]:
+    """(state folder, library) for ``dispatcher``, the library created empty."""
+    from arboretum_library.store import Library
+
+    Library.open(tmp_path / "lib", create=True).close()
+    return tmp_path / "state", tmp_path / "lib"
+
+
+def toy_cloud(seed: int = 2):
+    """(points (4000, 3), labels) of the toy tree's toy scan."""
+    from arboretum_server.decompose.toytree import toy_scan, toy_truth
+
+    return toy_scan(toy_truth(), n=4000, seed=seed)
+
+
+def open_toy_draft(server, name: str = "toy", options: dict | None = None, shift=(0.0, 0.0, 0.0)) -> str:
+    """A new session of ``server`` with a refinement draft of the toy tree open (``TOY_DRAFT_OPTIONS``
+    unless ``options``; the points moved by ``shift``); its id."""
+    from arboretum_library import protocol as P
+
+    pts, labels = toy_cloud()
+    sid = reply_of(server, P.SessionNew()).session
+    reply_of(server, P.RefineOpen(session=sid, points=pts + shift, labels=labels, name=name,
+                                  options=TOY_DRAFT_OPTIONS if options is None else options))
+    return sid
+
+
+def library_ids(server) -> list[str]:
+    """The ids in ``server``'s library, sorted."""
+    from arboretum_library import protocol as P
+
+    return sorted(e["id"] for e in reply_of(server, P.LibraryList()).entries)

@@ -9,16 +9,14 @@ import numpy as np
 import pytest
 
 from arboretum_library import protocol as P
-from arboretum_library.store import Library
-from factories import dispatcher, reply_of
+from factories import dispatcher, library_ids, open_toy_draft, reply_of, service_folders
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 
 @pytest.fixture
 def server(tmp_path):
-    Library.open(tmp_path / "lib", create=True).close()
-    with dispatcher(tmp_path / "state", tmp_path / "lib") as d:
+    with dispatcher(*service_folders(tmp_path)) as d:
         yield d
 
 
@@ -27,17 +25,7 @@ ok = reply_of
 
 @pytest.fixture
 def draft(server):
-    from arboretum_server.decompose.toytree import toy_scan, toy_truth
-
-    pts, labels = toy_scan(toy_truth(), n=4000, seed=2)
-    sid = ok(server, P.SessionNew()).session
-    ok(server, P.RefineOpen(session=sid, points=pts, labels=labels, name="toy",
-                            options={"n_main": 3, "n_lobes": 5, "points": 4000}))
-    return sid
-
-
-def library_ids(server) -> list[str]:
-    return sorted(e["id"] for e in ok(server, P.LibraryList()).entries)
+    return open_toy_draft(server)
 
 
 def test_a_second_commit_of_the_same_draft_answers_the_first_ids(server, draft):

@@ -13,7 +13,14 @@ import pytest
 from arboretum_library import protocol as P
 from arboretum_library.model import Provenance
 from arboretum_library.store import Library
-from factories import dispatcher, make_example, reply_of
+from factories import (
+    dispatcher,
+    library_ids,
+    make_example,
+    open_toy_draft,
+    reply_of,
+    service_folders,
+)
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
@@ -22,22 +29,10 @@ ok = reply_of
 
 @pytest.fixture
 def folders(tmp_path):
-    Library.open(tmp_path / "lib", create=True).close()
-    return tmp_path / "state", tmp_path / "lib"
+    return service_folders(tmp_path)
 
 
-def open_draft(server) -> str:
-    from arboretum_server.decompose.toytree import toy_scan, toy_truth
-
-    pts, labels = toy_scan(toy_truth(), n=4000, seed=2)
-    sid = ok(server, P.SessionNew()).session
-    ok(server, P.RefineOpen(session=sid, points=pts, labels=labels, name="toy",
-                            options={"n_main": 3, "n_lobes": 5, "points": 4000}))
-    return sid
-
-
-def library_ids(server) -> list[str]:
-    return sorted(e["id"] for e in ok(server, P.LibraryList()).entries)
+open_draft = open_toy_draft
 
 
 def test_find_content_gives_the_lowest_id_of_the_same_source_and_species(tmp_path):

@@ -13,34 +13,29 @@ import pytest
 
 from arboretum_library import protocol as P
 from arboretum_library.codec import load_record, save_record
-from arboretum_library.store import Library
 from arboretum_server.service import refine_store
 from arboretum_server.service.refine_store import DECOMPOSE_VERSION, RefineSource
-from factories import dispatcher, reply_of
+from factories import (
+    TOY_DRAFT_OPTIONS,
+    dispatcher,
+    open_toy_draft,
+    reply_of,
+    service_folders,
+    toy_cloud,
+)
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 ok = reply_of
-OPTIONS = {"n_main": 3, "n_lobes": 5, "points": 4000}
+OPTIONS = TOY_DRAFT_OPTIONS
 
 
 @pytest.fixture
 def folders(tmp_path):
-    Library.open(tmp_path / "lib", create=True).close()
-    return tmp_path / "state", tmp_path / "lib"
+    return service_folders(tmp_path)
 
 
-def toy() -> tuple[np.ndarray, np.ndarray]:
-    from arboretum_server.decompose.toytree import toy_scan, toy_truth
-
-    return toy_scan(toy_truth(), n=4000, seed=2)
-
-
-def open_draft(server) -> str:
-    pts, labels = toy()
-    sid = ok(server, P.SessionNew()).session
-    ok(server, P.RefineOpen(session=sid, points=pts, labels=labels, name="toy", options=OPTIONS))
-    return sid
+toy, open_draft = toy_cloud, open_toy_draft
 
 
 def refine_files(folders, sid: str) -> dict[str, bytes]:

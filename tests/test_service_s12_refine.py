@@ -10,19 +10,25 @@ import numpy as np
 import pytest
 
 from arboretum_library import protocol as P
-from arboretum_library.store import Library
-from factories import dispatcher, reply_of
+from factories import (
+    TOY_DRAFT_OPTIONS,
+    dispatcher,
+    library_ids,
+    open_toy_draft,
+    reply_of,
+    service_folders,
+    toy_cloud,
+)
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 ok = reply_of
-OPTIONS = {"n_main": 3, "n_lobes": 5, "points": 4000}
+OPTIONS = TOY_DRAFT_OPTIONS
 
 
 @pytest.fixture
 def folders(tmp_path):
-    Library.open(tmp_path / "lib", create=True).close()
-    return tmp_path / "state", tmp_path / "lib"
+    return service_folders(tmp_path)
 
 
 @pytest.fixture
@@ -31,22 +37,7 @@ def server(folders):
         yield d
 
 
-def toy(seed: int = 2) -> tuple[np.ndarray, np.ndarray]:
-    from arboretum_server.decompose.toytree import toy_scan, toy_truth
-
-    return toy_scan(toy_truth(), n=4000, seed=seed)
-
-
-def open_draft(server, name: str = "toy", options: dict | None = None, shift=(0.0, 0.0, 0.0)) -> str:
-    pts, labels = toy()
-    sid = ok(server, P.SessionNew()).session
-    ok(server, P.RefineOpen(session=sid, points=pts + shift, labels=labels, name=name,
-                            options=OPTIONS if options is None else options))
-    return sid
-
-
-def library_ids(server) -> list[str]:
-    return sorted(e["id"] for e in ok(server, P.LibraryList()).entries)
+toy, open_draft = toy_cloud, open_toy_draft
 
 
 def repeat_note(reply) -> bool:
