@@ -127,3 +127,35 @@ def test_a_float32_scan_at_utm_is_named_and_the_note_is_kept(tmp_path):
     out = decompose_scan(str(scan), file_sha256(scan), {"points": 3000})
     assert "are only 0.5 m apart" in out.notes[0]
     assert out.examples[0].provenance.parameters[NOTES_KEY][0] == out.notes[0]
+
+
+def test_a_build_after_decompose_runs_with_other_options_sees_no_surplus(tmp_path, capsys):
+    """helper-99: decompose stores the same file with other options beside (8 examples, then 3 with
+    --main 3); a build counted all 11 against the 8 one run gives and said a --rebuild had stopped
+    half-way, advice that would delete the --main 3 set."""
+    lib = tmp_path / "L"
+    for extra in ([], ["--main", "3"]):
+        assert main(["decompose", str(PINE), "--library", str(lib), "--points", "3000", *extra]) == 0
+    capsys.readouterr()
+    assert main(["library", "build", str(PINE), "--library", str(lib), "--points", "3000", "--json"]) == 0
+    record = json.loads(capsys.readouterr().out)["records"][0]
+    assert record["status"] == "skipped" and not any("not the" in n for n in record["notes"])
+
+
+def test_a_y_up_file_built_then_decomposed_is_stored_once(tmp_path, capsys):
+    """helper-99: a file that --up auto reads Y up, built and then decomposed with the same options, was
+    stored twice: build kept no up axis and a missing one read as Z up. Build keeps it now, and a missing
+    one (examples stored before session 12) matches either axis."""
+    from arboretum_library.pointio import read_points
+
+    pts = read_points(PINE).points
+    scan = tmp_path / "piney.xyz"
+    np.savetxt(scan, pts[:, [0, 2, 1]] * [1, 1, -1], fmt="%.4f")  # Y up, right-handed
+    lib = tmp_path / "L"
+    assert main(["library", "build", str(scan), "--library", str(lib), "--points", "3000", "--species", "pine"]) == 0
+    with Library.open(lib, readonly=True) as L:
+        assert {L.provenance(i).parameters["up_axis"] for i in L.ids()} == {"y"}
+    capsys.readouterr()
+    assert main(["decompose", str(scan), "--library", str(lib), "--points", "3000", "--species", "pine", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["stored"] == [] and len(data["already"]) == 6

@@ -206,3 +206,14 @@ def test_label_before_scalar_label(tmp_path, pts):
     ones, zeros = np.ones(len(pts), np.uint8), np.zeros(len(pts), np.float32)
     cloud = read_points(_ply(tmp_path / "b.ply", pts, {"scalar_label": zeros, "label": ones}), Z)
     assert cloud.labels is not None and cloud.labels.min() == 1
+
+
+def test_a_pandas_tab_file_with_a_shuffled_index_is_read(tmp_path):
+    """helper-99: pandas' to_csv(sep='\\t') writes the header '\\tx\\ty\\tz'; its leading tab was
+    stripped, the empty index name lost, and a shuffled index refused as ambiguous."""
+    rng = np.random.default_rng(0)
+    pts = rng.normal(size=(200, 3)) + [0, 0, 5]
+    f = tmp_path / "p.txt"
+    rows = ["\t".join([str(k)] + [f"{v:.6f}" for v in p]) for k, p in zip(rng.permutation(200), pts)]
+    f.write_text("\tx\ty\tz\n" + "\n".join(rows) + "\n")
+    assert np.allclose(read_points(f, ReadOptions(up="z")).points, pts, atol=1e-6)

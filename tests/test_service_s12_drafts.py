@@ -13,6 +13,7 @@ import pytest
 
 from arboretum_library import protocol as P
 from arboretum_library.codec import load_record, save_record
+from arboretum_library.errors import InputError
 from arboretum_server.service import refine_store
 from arboretum_server.service.refine_store import DECOMPOSE_VERSION, RefineSource
 from factories import (
@@ -168,3 +169,53 @@ def test_edits_after_a_torn_journal_tail_are_read_back(folders):
     with dispatcher(*folders) as server:  # HEAD: the second edit was behind the torn bytes, unread
         assert np.array_equal(ok(server, P.RefinePoints(session=sid)).lobe_of, two.lobe_of)
         assert ok(server, P.RefineUndo(session=sid)).revision == 3
+
+
+def test_a_passing_failure_during_a_replay_keeps_the_whole_journal(folders, monkeypatch):
+    """helper-99: a MemoryError at edit 2 of 3 was taken as the edit's refusal, and edits 2 and 3 were
+    dropped for good. Only an edit's own refusal (ArboretumError) shortens the draft; anything else fails
+    the request and leaves the files alone."""
+    import arboretum_server.service.handlers.refine as handlers
+
+    with dispatcher(*folders) as server:
+        sid = open_draft(server)
+        for _ in range(3):
+            last = ok(server, P.RemoveLobe(session=sid, lobe=0))
+    assert last.revision == 3
+    journal = (folders[0] / "sessions" / f"{sid}.refine.journal").read_bytes()
+    real, calls = handlers.apply_edit, []
+
+    def flaky(dec, kind, args):
+        calls.append(kind)
+        if len(calls) == 2:
+            raise MemoryError()
+        return real(dec, kind, args)
+
+    monkeypatch.setattr(handlers, "apply_edit", flaky)
+    with dispatcher(*folders) as server:
+        assert error_of(server, P.RefinePoints(session=sid)).code == "internal"
+    assert (folders[0] / "sessions" / f"{sid}.refine.journal").read_bytes() == journal
+    monkeypatch.setattr(handlers, "apply_edit", real)
+    with dispatcher(*folders) as server:  # memory back: all three edits
+        assert ok(server, P.RefineUndo(session=sid)).revision == 4
+
+
+def test_requests_waiting_on_a_failed_rebuild_are_all_refused(folders):
+    """helper-99: two requests arriving while the draft is rebuilt each start a rebuild; the first to
+    finish shortened the draft and refused, the second ran on the shorter draft it was not meant for."""
+    from arboretum_server.service.jobs import call_target
+
+    with dispatcher(*folders) as server:
+        sid = open_draft(server)
+        ok(server, P.RemoveLobe(session=sid, lobe=0))
+    folder = folders[0] / "sessions"
+    gen = load_record(folder / f"{sid}.refine.npz", RefineSource).generation
+    refine_store.append(folder, sid, gen, "merge_lobes", {"lobes": [0, 99]})  # refused on replay
+    with dispatcher(*folders) as server:
+        jobs = [server.handle(P.RefinePoints(session=sid)), server.handle(P.RemoveLobe(session=sid, lobe=0))]
+        results = [call_target(j.target, j.kwargs, lambda *a: None) for j in jobs]
+        for j, r in zip(jobs, results):
+            with pytest.raises(InputError, match="could not be rebuilt past edit 2 of 2"):
+                j.finish(r)
+        undone = ok(server, P.RefineUndo(session=sid))
+        assert (undone.revision, undone.can_undo) == (2, False)  # one edit kept (revision 1), none run since

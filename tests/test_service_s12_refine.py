@@ -190,3 +190,13 @@ def test_an_import_names_its_bare_examples(server):
     assert 9 <= len(bare) < len(done.ids) == 12
     shown = ", ".join(bare[:4]) + (", ..." if len(bare) > 4 else "")
     assert done.notes[-1] == f"{len(bare)} of 12 examples have no lobes ({shown}): they grow no twigs or leaves"
+
+
+def test_a_commit_of_no_examples_answers_no_ids(server, monkeypatch):
+    """helper-99: with no example made, the look-up's result was never bound (an internal error)."""
+    import arboretum_server.decompose.examples as examples
+
+    sid = open_draft(server)
+    monkeypatch.setattr(examples, "make_examples", lambda hbl, prov, new_id=None: [])
+    done = ok(server, P.RefineCommit(session=sid))
+    assert done.ids == () and library_ids(server) == []

@@ -34,8 +34,9 @@ def _header_names(line: bytes) -> list[str]:
     ``''``: the unnamed row-index column that pandas (``,x,y,z``) and R's ``write.csv``
     (``"","X","Y","Z"``) write first. Dropped, it shifted every name one column left and the cloud was
     read as (index, x, y)."""
-    text = line.decode("utf-8", "replace").strip().lstrip("/#").strip()
+    text = line.decode("utf-8", "replace").strip(" \r\n").lstrip("/#").strip(" ")  # a leading tab is a name
     sep = r"," if "," in text else r";" if ";" in text else r"\t" if "\t" in text else r"\s+"
+    text = text if sep == r"\t" else text.strip()
     return [t.strip().strip("\"'").strip().lower() for t in re.split(sep, text)]
 
 
@@ -80,7 +81,7 @@ def find_header(lines: list[bytes]) -> tuple[list[str] | None, int | None, int]:
         tokens = [t for t in re.split(rb"[,;\s]+", s) if t]
         if all(_is_number(t) for t in tokens):
             return names, i, len(tokens)
-        names = _header_names(s)
+        names = _header_names(line.split(b"#", 1)[0])  # unstripped: a leading tab is an empty first name
     return names, None, 0
 
 

@@ -81,18 +81,30 @@ def plan(lib, records: list, options: Any = None) -> list:
     return todo
 
 
+def _one_run(lib, ids: list[str]) -> list[str]:
+    """The ids among ``ids`` (examples of one file) made with the species and options of ``ids[0]``: what
+    one run stored. ``decompose`` stores the same file with other options beside them (session 12)."""
+    def key(i: str):
+        prov = lib.provenance(i)
+        return prov.species, {k: v for k, v in prov.parameters.items() if k not in (NOTES_KEY, SCAN_EXAMPLES_KEY)}
+
+    first = key(ids[0])
+    return [i for i in ids if key(i) == first]
+
+
 def _skip(lib, r, ids: list[str], options: Any) -> None:
     prov = lib.provenance(ids[0])
     params = prov.parameters
     r.status, r.examples = "skipped", list(ids)
     r.notes = list(params.get(NOTES_KEY, []))
     want = params.get(SCAN_EXAMPLES_KEY)
-    if want is not None and len(ids) < int(want):
-        r.notes.append(f"{int(want) - len(ids)} of its {int(want)} examples are no longer in the library "
+    run = _one_run(lib, ids) if want is not None else ids
+    if want is not None and len(run) < int(want):
+        r.notes.append(f"{int(want) - len(run)} of its {int(want)} examples are no longer in the library "
                        "(deleted since it was built, or lost in a power loss): kept so; --rebuild makes "
                        "them all again")
-    elif want is not None and len(ids) > int(want):
-        r.notes.append(f"the library holds {len(ids)} examples of it, not the {int(want)} it gives: a "
+    elif want is not None and len(run) > int(want):
+        r.notes.append(f"the library holds {len(run)} examples of it, not the {int(want)} it gives: a "
                        "--rebuild stopped while deleting the old ones; --rebuild again replaces them all")
     differ = [("species", prov.species, r.species)] if options is not None and prov.species != r.species else []
     differ += [(k, params.get(k), getattr(options, k)) for k in COMPARED

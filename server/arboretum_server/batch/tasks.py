@@ -14,6 +14,7 @@ from typing import Any
 
 from arboretum_library.model import Example
 from arboretum_server.decompose.examples import SCAN_EXAMPLES_KEY as SCAN_EXAMPLES_KEY
+from arboretum_server.decompose.examples import UP_AXIS_KEY
 
 THREAD_ENV = {
     "OMP_WAIT_POLICY": "PASSIVE",
@@ -127,6 +128,7 @@ def _decompose(path: str, sha256: str, options: dict[str, Any], t0: float) -> Sc
     dec = decompose(cloud.points, opts, labels=cloud.labels)
     t_dec = time.perf_counter()
     prov = provenance(path, opts, sha256=sha256)
+    prov = replace(prov, parameters={**prov.parameters, UP_AXIS_KEY: cloud.up_axis})  # as decompose keeps it
     examples = make_examples(dec.hbl, prov, counter_ids("scan"))
     if not examples:
         return _failed(path, sha256, "decomposition gave no examples (no main branch found)", t0)

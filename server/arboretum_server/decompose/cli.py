@@ -183,7 +183,7 @@ def _stored(lib, prov) -> tuple[list[str], list[str]]:
     want = json.loads(json.dumps(prov.parameters))  # as meta.json holds them
     same, other = [], []
     for id_ in sorted(lib.find_source(prov.source_sha256)):
-        params = {UP_AXIS_KEY: "z", **lib.provenance(id_).parameters}  # stored before session 12: read Z up
+        params = {UP_AXIS_KEY: want.get(UP_AXIS_KEY), **lib.provenance(id_).parameters}  # none stored: either
         (same if all(params.get(k) == v for k, v in want.items()) else other).append(id_)
     return same, other
 

@@ -54,8 +54,9 @@ SCAN_EXAMPLES_KEY = "scan_examples"
 """Provenance parameter holding how many examples the scan gave (``library build`` tells a complete scan
 on resume by it; ``decompose`` a surplus left by an interrupted ``--rebuild``)."""
 UP_AXIS_KEY = "up_axis"
-"""Provenance parameter of ``decompose``: the file's up axis as read ('z' or 'y'; missing: 'z'). A rerun
-with another ``--up`` is another decomposition of the file."""
+"""Provenance parameter of ``decompose`` and ``library build``: the file's up axis as read ('z' or 'y';
+missing in examples stored before session 12, which then match either). A rerun with another ``--up``
+is another decomposition of the file."""
 
 
 def provenance(source: str | Path, options: DecomposeOptions, sha256: str | None = None) -> Provenance:

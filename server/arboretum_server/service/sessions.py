@@ -43,7 +43,7 @@ class RefineDraft:
     revision: int = 0
     generation: str = ""
     """Token of the saved source this draft journals its edits under (``refine_store``). A commit of a
-    draft already in the library is found by content in the library itself (``refine.stored_copies``)."""
+    draft already in the library is found by content in the library itself (``handlers.refine._copies``)."""
 
     @property
     def current(self) -> Any:

@@ -56,10 +56,9 @@ def decompose_job(progress, points: np.ndarray, labels: np.ndarray | None, speci
     for done, e in enumerate(edits):
         try:
             _replay(draft, e)
-        except Exception as exc:  # any failure: keep the edits before it, not lose them all
-            why = str(exc) if isinstance(exc, ArboretumError) else f"{type(exc).__name__}: {exc}"
-            failed = {"done": done, "kind": e["kind"], "error": why}
-            break
+        except ArboretumError as exc:  # the edit refused now (another rule): keep the edits before it
+            failed = {"done": done, "kind": e["kind"], "error": str(exc)}
+            break  # any other failure (memory, a bug) fails this request only: the journal stays whole
     return {"states": draft.states, "index": draft.index, "revision": draft.revision, "failed": failed}
 
 
@@ -87,13 +86,13 @@ def _with_draft(ctx: Context, session_id: str, then: Callable[[Session, RefineDr
 
     def finish(r: dict) -> P.Reply:
         ctx.sessions.still_open(s)
-        if s.refine is not None:  # another request rebuilt it meanwhile: keep that one
-            return then(s, s.refine)
-        failed, kept = r.get("failed"), src
-        if failed:
-            kept = refine_store.keep_first(ctx.sessions.dir(), s.id, src, failed["done"], ctx.sessions.fsync)
-        s.refine = RefineDraft(r["states"], r["index"], src.name, src.species, r["revision"], kept.generation)
-        if failed:  # the request was meant for the whole draft: not run on the shorter one
+        failed = r.get("failed")
+        if s.refine is None:  # else another request rebuilt it meanwhile: keep that one
+            kept = src
+            if failed:
+                kept = refine_store.keep_first(ctx.sessions.dir(), s.id, src, failed["done"], ctx.sessions.fsync)
+            s.refine = RefineDraft(r["states"], r["index"], src.name, src.species, r["revision"], kept.generation)
+        if failed:  # meant for the whole draft, whichever request rebuilt it: not run on the shorter one
             raise InputError(_replay_failed(failed, len(edits)))
         return then(s, s.refine)
 
@@ -184,6 +183,7 @@ def commit(ctx: Context, req: P.RefineCommit):
         prov = Provenance(d.name, "", dec.options.species, dec.options.as_dict())
         made = make_examples(dec.hbl, prov)
         hashes = content_hashes(made)
+        found: list[str | None] = []
         if made and all(found := _copies(lib, hashes, prov)):  # no lock to answer a repeated commit
             return _committed_already(found, said, stats)
         stem = "".join(c if c.isalnum() or c in "-_" else "-" for c in d.name)[:60] or "scan"
@@ -208,15 +208,6 @@ def _committed_already(found: list, said: tuple, stats: dict) -> P.LibraryImport
         f"this draft {P.ALREADY_COMMITTED}, unchanged since, as {_span(ids)}: not stored again",))
 
 
-def stored_copies(lib: Any, made: list, prov: Any) -> list[str | None]:
-    """For each example of ``made``, the id of one in ``lib`` identical to it, or None.
-
-    Identical: the same arrays (the catalog's ``content_sha256``, the SHA-256 of arrays.npz, which holds
-    no id, time or provenance: the same tree hashes alike under any id and after a restart) and the same
-    source name and species. The lowest such id is given (an earlier server stored copies)."""
-    return _copies(lib, content_hashes(made), prov)
-
-
 def content_hashes(made: list) -> list[str]:
     """The ``content_sha256`` each example of ``made`` will have in the library."""
     from arboretum_library.folders import encode
@@ -225,6 +216,10 @@ def content_hashes(made: list) -> list[str]:
 
 
 def _copies(lib: Any, hashes: list[str], prov: Any) -> list[str | None]:
+    """For each of ``hashes``, the id of an example in ``lib`` with those arrays, or None. Identical: the
+    same arrays (the catalog's ``content_sha256``, the SHA-256 of arrays.npz, which holds no id, time or
+    provenance: the same tree hashes alike under any id and after a restart) and the same source name
+    and species; the lowest such id (an earlier server stored copies)."""
     by_hash = lib.find_content(hashes, prov.source, prov.species)  # one query on the species' rows
     return [by_hash.get(h) for h in hashes]
 
