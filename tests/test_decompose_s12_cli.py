@@ -96,7 +96,7 @@ def test_another_up_axis_is_another_decomposition(tmp_path, capsys):
     assert again["already"] == first and again["stored"] == []
 
 
-def test_examples_stored_before_session_12_read_z_up(tmp_path, capsys):
+def test_examples_stored_before_session_12_match_either_axis(tmp_path, capsys):
     lib = tmp_path / "L"
     first = _run(capsys, PINE, "--library", lib)["stored"]
     with Library.open(lib) as L:  # as an older decompose stored them: no up axis, no example count
