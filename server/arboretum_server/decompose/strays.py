@@ -64,43 +64,14 @@ def strays(pts: np.ndarray) -> np.ndarray:
 
 
 def groups(pts: np.ndarray, far: float) -> np.ndarray:
-    """(N,) bool: points of ``pts`` (N, 3) in small pieces apart from the tree, below or above it (module doc).
-
-    The pieces are the connected sets of occupied cells of side ``far`` / 2 (26 neighbours): points closer
-    than ``far`` / 2 always share a piece, points farther than ``far`` x sqrt(3) apart never link. When the
-    cells' span is too wide for one 64-bit key (a stray 10^6 heights away), ``_packed`` closes the gaps."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
+    """(N,) bool: points of ``pts`` (N, 3) in small pieces apart from the tree, below or above it (module doc)."""
     out = np.zeros(len(pts), bool)
-    if far <= 0 or not np.isfinite(far):
+    if far <= 0 or not np.isfinite(far) or (cut := _pieces(pts, far)) is None:
         return out
-    c = np.floor((pts - pts.min(axis=0)) / (far / 2.0)).astype(np.int64) + 1  # from 1: cell 0 is a neighbour
-    dims = c.max(axis=0) + 2
-    if float(np.prod(dims.astype(np.float64))) > 2.0 ** 62:  # a stray very far away: close the gaps
-        c = np.stack([_packed(c[:, a]) for a in range(3)], axis=1)
-        dims = c.max(axis=0) + 2
-        if float(np.prod(dims.astype(np.float64))) > 2.0 ** 62:  # no cell key fits (never for a tree)
-            return out
-    key = (c[:, 0] * dims[1] + c[:, 1]) * dims[2] + c[:, 2]
-    cells, inverse, count = np.unique(key, return_inverse=True, return_counts=True)
-    rows, nbrs = [], []
-    for dx, dy, dz in product((-1, 0, 1), repeat=3):
-        if (dx, dy, dz) <= (0, 0, 0):  # each pair once: the 13 offsets after (0, 0, 0)
-            continue
-        want = cells + (dx * dims[1] + dy) * dims[2] + dz
-        j = np.minimum(np.searchsorted(cells, want), len(cells) - 1)
-        hit = cells[j] == want
-        rows.append(np.flatnonzero(hit))
-        nbrs.append(j[hit])
-    r, q = np.concatenate(rows), np.concatenate(nbrs)
-    adj = coo_matrix((np.ones(len(r)), (r, q)), shape=(len(cells), len(cells)))
-    _, piece = connected_components(adj, directed=False)
-    size = np.bincount(piece, weights=count)
+    of, size = cut
     tree = int(size.argmax())
     if size[tree] < TREE_SHARE * len(pts):
         return out
-    of = piece[inverse.reshape(-1)]
     low = np.full(len(size), np.inf)
     high = np.full(len(size), -np.inf)
     np.minimum.at(low, of, pts[:, 2])
@@ -120,6 +91,38 @@ def groups(pts: np.ndarray, far: float) -> np.ndarray:
     nearest = np.full(len(size), np.inf)
     np.minimum.at(nearest, of[member], gap)
     return (np.isin(np.arange(len(size)), cand) & (nearest > STRAY_GROUP_GAP * far))[of]
+
+
+def _pieces(pts: np.ndarray, far: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """(piece of each point (N,), points per piece): the connected sets of occupied cells of side ``far``
+    / 2 (26 neighbours): points closer than ``far`` / 2 always share a piece, points farther than ``far`` x
+    sqrt(3) apart never link. When the cells' span is too wide for one 64-bit key (a stray 10^6 heights
+    away), ``_packed`` closes the gaps; None when even that does not fit (never for a tree)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    c = np.floor((pts - pts.min(axis=0)) / (far / 2.0)).astype(np.int64) + 1  # from 1: cell 0 is a neighbour
+    dims = c.max(axis=0) + 2
+    if float(np.prod(dims.astype(np.float64))) > 2.0 ** 62:  # a stray very far away: close the gaps
+        c = np.stack([_packed(c[:, a]) for a in range(3)], axis=1)
+        dims = c.max(axis=0) + 2
+        if float(np.prod(dims.astype(np.float64))) > 2.0 ** 62:
+            return None
+    key = (c[:, 0] * dims[1] + c[:, 1]) * dims[2] + c[:, 2]
+    cells, inverse, count = np.unique(key, return_inverse=True, return_counts=True)
+    rows, nbrs = [], []
+    for dx, dy, dz in product((-1, 0, 1), repeat=3):
+        if (dx, dy, dz) <= (0, 0, 0):  # each pair once: the 13 offsets after (0, 0, 0)
+            continue
+        want = cells + (dx * dims[1] + dy) * dims[2] + dz
+        j = np.minimum(np.searchsorted(cells, want), len(cells) - 1)
+        hit = cells[j] == want
+        rows.append(np.flatnonzero(hit))
+        nbrs.append(j[hit])
+    r, q = np.concatenate(rows), np.concatenate(nbrs)
+    _, piece = connected_components(coo_matrix((np.ones(len(r)), (r, q)), shape=(len(cells), len(cells))),
+                                    directed=False)
+    return piece[inverse.reshape(-1)], np.bincount(piece, weights=count)
 
 
 def _packed(cells: np.ndarray) -> np.ndarray:
