@@ -119,15 +119,13 @@ class Autosave:
             snap = load_record(self.snapshot_path, Snapshot)
             history, self.seq = snap.history, snap.seq
         old, _ = _read_journal(self.old_journal_path)
-        entries, good = _read_journal(self.journal_path)
+        entries = trim_journal(self.journal_path)  # a torn tail cut off before anything is appended
         for entry in old + entries:
             if entry["seq"] <= self.seq:
                 continue
             history = _replay(history, entry)
             self.seq = entry["seq"]
             self._since_snapshot += 1
-        if self.journal_path.exists() and good < self.journal_path.stat().st_size:
-            os.truncate(self.journal_path, good)  # drop a torn tail before appending
         if self.old_journal_path.exists():  # a snapshot cut short: fold both journals into a new one now
             try:
                 self.snapshot(history)
@@ -181,7 +179,7 @@ class Autosave:
             os.replace(self.journal_path, self.old_journal_path)
         else:
             entries = self.journal_path.read_bytes()[: _read_journal(self.journal_path)[1]]
-            os.truncate(self.old_journal_path, _read_journal(self.old_journal_path)[1])  # a torn tail
+            trim_journal(self.old_journal_path)
             with open(self.old_journal_path, "ab") as fh:
                 fh.write(entries)
                 _sync(fh, self.fsync)
@@ -238,9 +236,13 @@ def _sync(fh, fsync: bool) -> None:
         os.fsync(fh.fileno())
 
 
-def read_journal(path: Path) -> tuple[list[dict], int]:
-    """Valid entries of a journal and the byte length they fill (a torn or corrupt tail stops it)."""
-    return _read_journal(path)
+def trim_journal(path: Path) -> list[dict]:
+    """The valid entries of the journal ``path``, its torn or corrupt tail (a kill during an append) cut
+    off, so that entries appended next are read back (after a torn tail they would not be)."""
+    entries, good = _read_journal(path)
+    if path.exists() and good < path.stat().st_size:
+        os.truncate(path, good)
+    return entries
 
 
 def _read_journal(path: Path) -> tuple[list[dict], int]:

@@ -10,7 +10,6 @@ replay that fails at an edit keeps the edits before it (``keep_first``).
 
 from __future__ import annotations
 
-import os
 import secrets
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -19,7 +18,7 @@ import numpy as np
 
 from arboretum_library.codec import load_record, save_record
 from arboretum_library.errors import InputError
-from arboretum_server.assembly.state import append_entry, pack_arrays, read_journal, unpack_arrays
+from arboretum_server.assembly.state import append_entry, pack_arrays, trim_journal, unpack_arrays
 
 DECOMPOSE_VERSION = 2
 """Version of what ``decompose`` and the refinement edits (``decompose.refine``) compute from a scan, its
@@ -77,7 +76,7 @@ def load(folder: Path, sid: str) -> tuple[RefineSource, list[dict]] | None:
         return None
     src = load_record(source, RefineSource)
     check_version(src, sid)
-    entries = _entries(journal)
+    entries = trim_journal(journal)
     ops = [{"kind": e["kind"], "args": {**e["args"], **unpack_arrays(e["arrays"])}}
            for e in entries if e.get("gen") == src.generation]
     return src, ops
@@ -99,20 +98,12 @@ def keep_first(folder: Path, sid: str, src: RefineSource, count: int, fsync: boo
     appended again under a new generation token, then the source is saved with that token (atomic: a crash
     in between leaves the old generation current). The older entries stay in the file, unread."""
     source, journal = _paths(folder, sid)
-    kept = [e for e in _entries(journal) if e.get("gen") == src.generation][:count]
+    kept = [e for e in trim_journal(journal) if e.get("gen") == src.generation][:count]
     new = replace(src, generation=secrets.token_hex(8))
     for e in kept:
         append_entry(journal, {**e, "gen": new.generation}, fsync)
     save_record(source, new, fsync=fsync)
     return new
-
-
-def _entries(journal: Path) -> list[dict]:
-    """The journal's entries, dropping a torn tail (a kill during an append) so later appends are read."""
-    entries, good = read_journal(journal)
-    if journal.exists() and good < journal.stat().st_size:
-        os.truncate(journal, good)
-    return entries
 
 
 def delete(folder: Path, sid: str) -> None:
