@@ -295,8 +295,9 @@ class _Cluster:
 
     def __exit__(self, kind, *exc) -> None:
         if kind is not None and issubclass(kind, KeyboardInterrupt):
-            # Ctrl-C or SIGTERM (Terminated): the workers are stopped, killed when busy in a task; Dask's warnings about that
-            # ("Worker process still alive after 4.0 seconds, killing") say nothing to the user
+            # Ctrl-C or SIGTERM (Terminated): the workers are stopped, killed when busy in a task; Dask's
+            # warnings about that ("Worker process still alive after 4.0 seconds, killing") say nothing to
+            # the user
             import logging
 
             logging.getLogger("distributed").setLevel(logging.CRITICAL)
@@ -322,7 +323,6 @@ def _workers_ignore_sigint() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
-
 
 
 class Terminated(KeyboardInterrupt):

@@ -6,8 +6,8 @@ Two kinds, both measured against a tenth of the cloud's height (``STRAY_APART``)
 - *lone points*: fewer than ``STRAY_NEIGHBOURS`` other points within that distance;
 - *small groups*: pieces of the cloud, cut wherever it has a gap of about that distance, holding under
   ``STRAY_GROUP`` of the points each and lying wholly below or wholly above one piece holding
-  ``TREE_SHARE`` of them or more (the tree), farther from it than ``STRAY_GROUP_GAP`` such distances. A cluster of 60 points 10 m under scan 07 (71,000 points)
-  was its trunk base before. Pieces level with the tree are kept: they are wood behind a gap in the
+  ``TREE_SHARE`` of them or more (the tree), farther from it than ``STRAY_GROUP_GAP`` such distances.
+  A cluster of 60 points 10 m under scan 07 (71,000 points) was its trunk base before. Pieces level with the tree are kept: they are wood behind a gap in the
   scan (a missing sector cuts limb ends off) more often than noise, and set neither base nor height.
 
 A sparse cloud (more than 1 % lone points, or no piece holding most of the points) has no strays.
