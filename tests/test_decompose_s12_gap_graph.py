@@ -6,8 +6,6 @@ components holding ``BIG`` of the points are paired; below, the graph is the one
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -59,9 +57,7 @@ def test_near_duplicates_are_paired_only_among_big_components():
     pts = np.vstack([_clusters(3000, 6, rng, 0.8), slab, slab + [0.11, 0.0, 0.0]])
     g = knn_graph(pts, 5, 0.05)
     assert g.components > graph.MAX_PAIRS_COMPONENTS
-    t = time.perf_counter()
     gaps = gap_graph(pts, g, 0.05)
-    took = time.perf_counter() - t
     sizes = np.bincount(g.component)
     e = gaps.tocoo()
     across = g.component[e.row] != g.component[e.col]
@@ -70,7 +66,6 @@ def test_near_duplicates_are_paired_only_among_big_components():
     # a gap edge is one of knn_graph's bridges or joins two big components
     assert (across & ~bridge & ~(big[g.component[e.row]] & big[g.component[e.col]])).sum() == 0
     assert big.sum() == 2 and (across & ~bridge).sum() > 0  # the two big pieces are joined by shortcuts
-    assert took < 20  # no per-pair work: 27.8 M pairs took 4 min before (a ceiling, not a benchmark)
 
 
 def test_pairs_over_the_query_budget_fall_back_to_big_components(monkeypatch):
