@@ -82,14 +82,11 @@ def plan(lib, records: list, options: Any = None) -> list:
 
 
 def _one_run(lib, ids: list[str]) -> list[str]:
-    """The ids among ``ids`` (examples of one file) made with the species and options of ``ids[0]``: what
-    one run stored. ``decompose`` stores the same file with other options beside them (session 12)."""
-    def key(i: str):
-        prov = lib.provenance(i)
-        return prov.species, {k: v for k, v in prov.parameters.items() if k not in (NOTES_KEY, SCAN_EXAMPLES_KEY)}
+    """The ids among ``ids`` (examples of one file) made in the run of ``ids[0]`` (``examples.run_key``):
+    ``decompose`` stores the same file with other options beside them (session 12)."""
+    from arboretum_server.decompose.examples import split_runs
 
-    first = key(ids[0])
-    return [i for i in ids if key(i) == first]
+    return split_runs(lib, ids, lib.provenance(ids[0]))[0]
 
 
 def _skip(lib, r, ids: list[str], options: Any) -> None:

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from arboretum_library.model import Example
+from arboretum_server.decompose.examples import NOTES_KEY as NOTES_KEY
 from arboretum_server.decompose.examples import SCAN_EXAMPLES_KEY as SCAN_EXAMPLES_KEY
 from arboretum_server.decompose.examples import UP_AXIS_KEY
 
@@ -41,8 +42,6 @@ WORKER_CONFIG = {
 """Dask settings of LocalCluster workers: no statistical profiler (it samples the task's stack every
 10 ms) and slower housekeeping ticks; together about 8 % of a scan's time on this machine (measured).
 The preload runs ``dask_setup`` in every worker."""
-NOTES_KEY = "decompose_notes"
-"""Provenance parameter holding the scan's decomposition notes (reported again when a rerun skips it)."""
 
 
 def dask_setup(worker: Any) -> None:

@@ -172,20 +172,13 @@ def _check_up(scan: str, cloud, up: str) -> None:
 
 def _stored(lib, prov) -> tuple[list[str], list[str]]:
     """(ids, other ids) of the examples in ``lib`` from the scan of ``prov``, by its SHA-256 (as
-    ``library build`` finds a scan), split by whether they were made with the same options: every
-    decomposition option (``DecomposeOptions.as_dict``) equal. ([], []) without a library."""
-    import json
+    ``library build`` finds a scan), split by whether they were made with the same species, options and
+    up axis (``examples.run_key``). ([], []) without a library."""
+    from .examples import split_runs
 
     if lib is None or not prov.source_sha256:
         return [], []
-    from .examples import UP_AXIS_KEY
-
-    want = json.loads(json.dumps(prov.parameters))  # as meta.json holds them
-    same, other = [], []
-    for id_ in sorted(lib.find_source(prov.source_sha256)):
-        params = {UP_AXIS_KEY: want.get(UP_AXIS_KEY), **lib.provenance(id_).parameters}  # none stored: either
-        (same if all(params.get(k) == v for k, v in want.items()) else other).append(id_)
-    return same, other
+    return split_runs(lib, sorted(lib.find_source(prov.source_sha256)), prov)
 
 
 def _surplus(lib, ids: list[str]) -> str | None:

@@ -9,6 +9,7 @@ species and the decomposition options.
 from __future__ import annotations
 
 import hashlib
+import json
 from collections.abc import Callable
 from pathlib import Path
 
@@ -57,6 +58,33 @@ UP_AXIS_KEY = "up_axis"
 """Provenance parameter of ``decompose`` and ``library build``: the file's up axis as read ('z' or 'y';
 missing in examples stored before session 12, which then match either). A rerun with another ``--up``
 is another decomposition of the file."""
+
+
+NOTES_KEY = "decompose_notes"
+"""Provenance parameter of ``library build``: the scan's decomposition notes (reported again when a rerun
+skips it)."""
+RUN_RECORDS = (SCAN_EXAMPLES_KEY, NOTES_KEY)
+"""Provenance parameters that record what a run gave, not how it was made."""
+
+
+def run_key(prov: Provenance, up_axis: str | None = None) -> str:
+    """What two examples of one file share when one run made them: the species and every decomposition
+    parameter with the up axis (``up_axis`` stands in for one stored without it, so old examples match
+    either axis), as JSON (as meta.json holds them). ``decompose`` stores one file with other options beside
+    a run; ``decompose`` and ``library build`` both tell the runs apart by this."""
+    params = {k: v for k, v in prov.parameters.items() if k not in RUN_RECORDS}
+    params.setdefault(UP_AXIS_KEY, up_axis)
+    return json.dumps([prov.species, params], sort_keys=True)
+
+
+def split_runs(lib, ids: list[str], want: Provenance) -> tuple[list[str], list[str]]:
+    """(ids, other ids): ``ids`` (examples of one file in ``lib``) split by whether ``run_key`` matches
+    the run of ``want``."""
+    key = run_key(want)
+    same, other = [], []
+    for id_ in ids:
+        (same if run_key(lib.provenance(id_), want.parameters.get(UP_AXIS_KEY)) == key else other).append(id_)
+    return same, other
 
 
 def provenance(source: str | Path, options: DecomposeOptions, sha256: str | None = None) -> Provenance:
