@@ -86,7 +86,7 @@ def test_an_implausible_height_is_noted_once_for_the_build(tmp_path, capsys):
 
 
 def test_sigterm_raises_terminated_once_and_waits_for_the_cluster_start():
-    from arboretum_server.batch.build import Terminated, _sigterm_waits, sigterm_stops
+    from arboretum_server.batch.signals import Terminated, sigterm_stops, sigterm_waits
 
     before = signal.getsignal(signal.SIGTERM)
     with sigterm_stops():
@@ -97,7 +97,7 @@ def test_sigterm_raises_terminated_once_and_waits_for_the_cluster_start():
         time.sleep(0.1)
     assert signal.getsignal(signal.SIGTERM) is before
     with sigterm_stops():
-        with pytest.raises(Terminated), _sigterm_waits():
+        with pytest.raises(Terminated), sigterm_waits():
             os.kill(os.getpid(), signal.SIGTERM)
             time.sleep(0.1)
             started = True  # not cut short: raised when the block ends

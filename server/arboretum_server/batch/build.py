@@ -24,13 +24,9 @@ A scan that cannot be read, is empty or holds no tree is reported (``ScanRecord.
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
-import signal
-import threading
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -41,6 +37,7 @@ from arboretum_library.progress import ProgressFn, no_progress
 
 from .plan import plan, scan_stem
 from .scans import expand_scans
+from .signals import sigterm_waits, workers_ignore_sigint
 from .tasks import MALLOC_STATIC, WORKER_CONFIG, WORKER_ENV, ScanOutcome, decompose_scan
 from .waiting import Waiting, completed
 
@@ -284,7 +281,7 @@ class _Cluster:
         # have left that variable (nannies os.environ.update() their pre-spawn environment): hide it.
         self.hidden = {k: os.environ.pop(k) for k in MALLOC_STATIC if k in os.environ}
         with dask.config.set({"distributed.nanny.pre-spawn-environ": dict(WORKER_ENV), **WORKER_CONFIG}), \
-                _workers_ignore_sigint(), _sigterm_waits():
+                workers_ignore_sigint(), sigterm_waits():
             # no dashboard; the scheduler's HTTP server (health, metrics) on a free port, so that another
             # cluster on port 8787 brings no "Port 8787 is already in use" warning
             self.cluster = LocalCluster(n_workers=self.o.workers, threads_per_worker=1, processes=True,
@@ -306,70 +303,3 @@ class _Cluster:
         if self.cluster is not None:
             self.cluster.close()
         os.environ.update(self.hidden)
-
-
-@contextlib.contextmanager
-def _workers_ignore_sigint() -> Iterator[None]:
-    """Ignore SIGINT while LocalCluster starts its worker processes, which keep ignoring it (an ignored
-    signal stays ignored across exec and Python then installs no KeyboardInterrupt handler): Ctrl-C in
-    the terminal reaches the whole process group, and only the client should handle it (cancel, shut the
-    cluster down) instead of every worker printing a KeyboardInterrupt traceback. A Ctrl-C during the
-    few seconds of start-up is lost. Outside the main thread (where signals cannot be set) a no-op."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
-
-
-class Terminated(KeyboardInterrupt):
-    """SIGTERM (``kill``, a service manager) under ``sigterm_stops``: the build stops as on Ctrl-C (tasks
-    cancelled, the cluster shut down, what was stored kept); ``arboretum library build`` exits 143."""
-
-
-_TERM = {"starting": False, "pending": False}
-"""``sigterm_stops``'s state: a SIGTERM while the LocalCluster starts waits until it is up (``pending``)."""
-
-
-@contextlib.contextmanager
-def sigterm_stops() -> Iterator[None]:
-    """Raise ``Terminated`` in the main thread on SIGTERM, once: a second one while the workers shut down
-    is ignored, so the shutdown completes (killed mid-way, the client left its workers' semaphores to
-    Python's "leaked semaphore objects" warning). While the LocalCluster starts it waits until the
-    cluster is up (``_sigterm_waits``). Outside the main thread a no-op. Used by the command, not by
-    ``build_library``: a library function leaves the process's signals alone."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def stop(*_) -> None:
-        if _TERM["starting"]:
-            _TERM["pending"] = True
-            return
-        signal.signal(signal.SIGTERM, lambda *_: None)  # a Python handler: children do not inherit it
-        raise Terminated
-
-    previous = signal.signal(signal.SIGTERM, stop)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-        _TERM.update(starting=False, pending=False)
-
-
-@contextlib.contextmanager
-def _sigterm_waits() -> Iterator[None]:
-    """Hold a SIGTERM (under ``sigterm_stops``) while the block starts the LocalCluster, and raise it
-    after: raised inside the start, it would leave worker processes behind."""
-    _TERM["starting"] = True
-    try:
-        yield
-    finally:
-        _TERM["starting"] = False
-    if _TERM["pending"]:
-        _TERM["pending"] = False
-        signal.signal(signal.SIGTERM, lambda *_: None)
-        raise Terminated

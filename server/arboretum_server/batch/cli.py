@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     """The command; SIGTERM stops it as Ctrl-C does, then exits 143 (128 + SIGTERM) with one line."""
     import sys
 
-    from .build import Terminated, sigterm_stops
+    from .signals import Terminated, sigterm_stops
 
     folder = check_args(args)
     with sigterm_stops():
