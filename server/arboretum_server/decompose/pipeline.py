@@ -1,10 +1,11 @@
 """``decompose``: a point cloud to a whole-tree HBL (VRTree section 3.4, Fig. 4, Appendix A).
 
-Steps (each timed in ``Decomposition.timing``): prepare (ground, downsample, root, scale) -> separate
-(leaf/wood) -> graph (kNN K=5 within r=0.05, bridged; Dijkstra from the root) -> mains (FPS endpoints,
-shortest paths, Algorithm 1 step 1, smoothing) -> lobes (bare trunk to wood, k-means into N_l clusters,
-alpha shapes) -> secondary (shortest paths to the lobe centres, Algorithm 1 step 2, Eq. 1, smoothing)
--> hbl (pipe-model radii, records).
+Steps (each timed in ``Decomposition.timing``): prepare (repeated points merged, strays and ground
+left out, downsample, root, scale) -> graph (kNN K=5 within r=0.05, bridged) -> separate (leaf/wood, on
+the graph's neighbours) -> mains (Dijkstra from the root, FPS endpoints, shortest paths, Algorithm 1
+step 1, smoothing) -> lobes (bare trunk to wood, foliage points, k-means into N_l clusters) -> secondary
+(alpha shapes, shortest paths to the lobe centres, Algorithm 1 step 2, Eq. 1, smoothing) -> hbl
+(pipe-model radii, records).
 """
 
 from __future__ import annotations
@@ -35,7 +36,8 @@ STEPS = ("prepare", "graph", "separate", "mains", "lobes", "secondary", "hbl")
 CENTRE_RADIUS = 0.02
 """Radius (0.8 m frame) of the centroid that centres branch vertices in the cloud."""
 CROWN_BASE = 0.04
-"""Points below this height (0.8 m frame, 5 % of the tree) never join the foliage (buttresses, ground)."""
+"""Points below this height (0.8 m frame, 5 % of the tree) never join a crown's foliage (buttresses,
+ground). Not the crown base of ``bare_trunk`` and the docs (the lowest main-branch fork)."""
 BARE_TRUNK_RADII = 2.5
 """Guessed leaf points below the crown base within this many local trunk radii of the trunk are wood."""
 HOOK_DROP = 0.05
