@@ -3,7 +3,9 @@ replace a routed branch which still enters a foreign lobe (VRTree has neither; o
 
 - ``straight_fallback``: a straight segment from the nearest main-branch vertex whose segment to the
   lobe centre stays clear;
-- ``bent_fallback``: a two-piece branch, main vertex -> one of the lobe's own points -> lobe centre.
+- ``bent_fallback``: a two-piece branch, main vertex -> one of the lobe's own points -> lobe centre
+  (every (n // ``waypoints``)-th of its n points, 32-63 of them, whose segment to the centre is
+  clear).
 """
 
 from __future__ import annotations
@@ -95,7 +97,8 @@ def _segment_samples(a: np.ndarray, b: np.ndarray, step: float) -> tuple[np.ndar
 def bent_fallback(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, waypoints: int = 32,
                   tries: int = 48, batch: int = 2, step: float = 0.005) -> tuple[np.ndarray, int, int] | None:
     """A two-piece secondary branch for lobe ``j``: main-branch vertex -> one of the lobe's own points ->
-    lobe centre, both pieces clear of foreign lobes. The ``tries`` main vertices nearest the centre that
+    lobe centre, both pieces clear of foreign lobes, through every (n // ``waypoints``)-th of the lobe's
+    n points whose segment to the centre is clear. The ``tries`` main vertices nearest the centre that
     lie outside every foreign lobe are tested ``batch`` at a time, nearest first; the first batch with a
     clear route gives the shortest one. None if none has one. For lobes that no straight segment reaches (lobes around a pine's trunk)."""
     centre, box = lobes[j].centre, boxes(lobes)

@@ -1,8 +1,12 @@
-"""The kNN graph of VRTree section 3.4: K neighbours within a query radius, Euclidean weights, bridged.
+"""The kNN graph of VRTree section 3.4: K neighbours within a query radius, weighted by length, bridged.
 
-A K = 5 graph of a real tree falls apart into components (FACTS.md); we add, for every component that
-cannot reach the root, the shortest edges that join the components into one (a minimum spanning tree
-over components), and report how many we added. Shortest paths from the root use Dijkstra.
+An edge weighs its length once for each of its two points that lists the other among its K nearest
+(``_edges`` sums both directions): a mutual neighbour pair weighs twice its length, a one-sided pair
+once, where the paper's Euclidean weights would be once for both (measured and kept:
+docs/decomposition-experiments.md). A K = 5 graph of a real tree falls apart into components
+(FACTS.md); we join them into one with bridges (``_bridges``: a minimum spanning tree over components
+of the shortest candidate edge between each two) and report how many we added. Shortest paths from the
+root use Dijkstra.
 """
 
 from __future__ import annotations
@@ -24,10 +28,11 @@ SHORTCUT_COST = 10.0
 
 @dataclass(frozen=True, eq=False)
 class Graph:
-    """A connected, symmetric, Euclidean-weighted kNN graph over a cloud."""
+    """A connected, symmetric kNN graph over a cloud, weighted by edge length (a mutual pair twice)."""
 
     adjacency: csr_matrix
-    """(N, N) symmetric CSR, weights = edge lengths."""
+    """(N, N) symmetric CSR, weights = edge lengths, doubled for a pair that are each other's neighbours
+    (``_edges`` adds both directions); bridges count once."""
     components: int
     """Connected components before bridging."""
     bridges: int
@@ -69,11 +74,12 @@ def gap_graph(points: np.ndarray, g: Graph, radius: float) -> csr_matrix | None:
     ``radius``, an edge from each point of the smaller one to its nearest point of the other within that
     reach. None for a graph of one component.
 
-    The bridges of ``knn_graph`` join each component by its globally shortest edges, which can hang a
-    trunk's upper part off a neighbouring limb where a scan gap cuts it from the fork below: the path to
-    the top then climbs the limb and comes back down (scan 06). On this graph every gap costs the same
-    per metre, so Dijkstra jumps the gap that saves the most path. ``pipeline.main_branches`` uses it
-    only for paths that turn down and up again like that.
+    The bridges of ``knn_graph`` are a minimum spanning tree over components of the shortest candidate
+    edge between each two (``_bridges``), which can hang a trunk's upper part off a neighbouring limb
+    where a scan gap cuts it from the fork below: the path to the top then climbs the limb and comes
+    back down (scan 06). On this graph every gap costs the same per metre, so Dijkstra jumps the gap
+    that saves the most path. ``pipeline.main_branches`` uses it only for paths that turn down and up
+    again like that.
     """
     if g.component is None:
         return None

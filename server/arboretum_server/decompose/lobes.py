@@ -1,13 +1,14 @@
 """Lobes (VRTree section 3.4): k-means of foliage points into N_l clusters, an alpha shape per cluster.
 
 The alpha shape is built from the Delaunay tetrahedralisation of the cluster: tetrahedra whose
-circumradius is below the probe radius 1/alpha (0.8 m frame) are kept, and the hull is the set of
-triangles that belong to exactly one kept tetrahedron, each oriented away from its tetrahedron. Such a
-boundary is always closed (watertight), unlike open3d's alpha meshes of surface-like clusters
-(FACTS.md). When the kept tetrahedra miss more than ``MIN_COVER`` of the cluster's points, or the
-cluster is degenerate (fewer than 4 points, flat), we fall back to the convex hull (jittered for flat or
-tiny clusters), oriented outward. A *carved* alpha shape (``carved_hull``) also keeps out of given
-blocker points (main-branch wood a lobe wraps round, ``carve.unwrap``).
+circumradius is below the probe radius are kept, and the hull is the set of triangles that belong to
+exactly one kept tetrahedron, each oriented away from its tetrahedron. Such a boundary is closed, unlike
+open3d's alpha meshes of surface-like clusters (FACTS.md), but can pinch or fall apart, so the probe
+radius 1/alpha (0.8 m frame) is tried at each of ``RADIUS_STEPS`` times itself, and the first shape that
+touches at least ``MIN_COVER`` of the cluster's points and is a closed, one-piece 2-manifold is taken.
+When none is, or the cluster is degenerate (fewer than 5 points, flat), we fall back to the convex hull
+(boxed by ``PAD`` for flat or tiny clusters), oriented outward. A *carved* alpha shape (``carved_hull``)
+also keeps out of given blocker points (main-branch wood a lobe wraps round, ``carve.unwrap``).
 """
 
 from __future__ import annotations
@@ -28,7 +29,8 @@ DENSE = 2000
 """Clusters with more points than this are tetrahedralised on a thinned subset (``thin``): only
 ``decompose --points 0`` and other dense inputs have such lobes (12,000 points give 100-500 a lobe)."""
 THIN = 16
-"""The thinning cell of a dense cluster is the probe radius / ``THIN`` (3.8 mm at the 0.8 m scale)."""
+"""The thinning cell of a dense cluster is the probe radius / ``THIN`` (1/13 / 16 = 4.8 mm at the 0.8 m
+scale)."""
 
 
 def kmeans(points: np.ndarray, k: int, rng: np.random.Generator, init: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -4,11 +4,12 @@ Branches start as shortest paths from the root. We resample each at a fixed arc-
 centre it in the cloud (each vertex moved to the centroid of the points around it), so paths that run up
 opposite sides of a thick trunk coincide. Merging a path P_i into the most similar kept branch P_opt
 walks both from the root: leading vertices of P_i closer than the threshold to P_opt are merged; the
-first one that is not is the connection point v_j, joined to its counterpart v_i on P_opt by a new edge,
-then moved by Eq. (1): v_j' = (v_i l_i + v_{j+1} l_{j+1}) / (l_i + l_{j+1}).
+first one that is not is the connection point v_j, joined by a new edge to v_i, the vertex of P_opt
+nearest the last merged vertex (the one before v_j), then moved by Eq. (1):
+v_j' = (v_i l_i + v_{j+1} l_{j+1}) / (l_i + l_{j+1}).
 
 "Most similar" is the lowest shape-context assignment cost (similarity.py) among the kept branches that
-share the longest merged prefix with P_i (within one threshold): on a shortest-path tree every path
+share the longest merged prefix with P_i (within one vertex): on a shortest-path tree every path
 shares an exact prefix with some kept branch, and merging into a branch with a shorter shared prefix
 would duplicate wood that is already there.
 """
@@ -152,11 +153,16 @@ def select_mains(paths: list[np.ndarray], n_main: int, tau: float, step: float,
     """Indices of ``n_main`` paths: the longest, then each time the one scoring highest beyond the kept ones.
 
     The score is reach ** w * spread ** (1 - w) with w = ``reach_weight``: by default the geometric mean
-    of two readings of "new wood" (ours; measured in docs/decomposition.md):
+    of two readings of "new wood" (ours; measured in docs/decomposition-experiments.md):
 
-    - *reach*: the arc length beyond the last merged vertex, capped at ``WANDER`` times the straight
-      distance from there to the tip, so paths that wander through foliage are not rewarded;
+    - *reach*: against each kept path, the arc length beyond the leading run of the path's vertices
+      within ``tau`` of it (``merged_prefix``), capped at ``WANDER`` times the straight distance from
+      there to the tip, so paths that wander through foliage are not rewarded; the least over the kept
+      paths;
     - *spread*: the largest distance of any of the path's vertices from the kept paths.
+
+    A path with less than two ``step`` of reach is never chosen, so fewer than ``n_main`` indices come
+    back when no path has that much left.
 
     Reach alone rewards paths that climb beside a kept branch just outside the merge threshold (through
     foliage, or up the far side of a trunk the scan saw only in part) or hop between a conifer's crowded

@@ -15,7 +15,8 @@ its foliage: the pine's lobes wrap its trunk), those lobes are rebuilt with the 
 
 Every secondary branch is smoothed (smooth.py, ours) with its connection point on the main branch and its
 tip at the lobe centre fixed; where the smoothed curve would enter a foreign lobe and the unsmoothed
-path does not, the unsmoothed path is kept, so smoothing never adds a crossing.
+path does not, the unsmoothed path smoothed with half the displacement limits is taken if it stays
+clear, else the unsmoothed path (``clear_smooth``), so smoothing never adds a crossing.
 """
 
 from __future__ import annotations

@@ -25,7 +25,7 @@ LIMIT = 0.012
 """Largest displacement of a vertex from its unsmoothed position (0.8 m scale)."""
 LOCAL_SPACINGS = 2.0
 """With a point cloud, a vertex moves at most this many local point spacings (median distance of its 8
-nearest points), clipped to [``LIMIT_MIN``, ``LIMIT``]."""
+nearest points); that limit is clipped to [``LIMIT_MIN``, ``LIMIT``]."""
 LIMIT_MIN = 0.004
 """Smallest per-vertex displacement limit (0.8 m scale)."""
 INFLATE = 0.0

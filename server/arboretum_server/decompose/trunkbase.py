@@ -21,7 +21,8 @@ spread would read as a trunk's)."""
 GAPPY = 0.25
 """A slab of a trunk's column holds at least this share of its fullest slab (``_no_column``)."""
 MAX_BASE_SPREAD = 0.12
-"""Largest 90th-percentile radius of the base band (fraction of height) that still is one trunk."""
+"""Largest 90th-percentile plan radius of the base band's largest cluster (fraction of height) that still
+is one trunk base: a base about a quarter of the height across."""
 STANDING = 0.01
 """A big cluster of the base band whose lowest point lies more than this fraction of the height above the
 lowest cluster's, and that holds fewer points per metre of height than ``HANGING_SHARE`` of the largest
