@@ -124,8 +124,9 @@ def centre_grid(pts: np.ndarray, r_trunk: float) -> BoxGrid:
 
 def main_branches(pts: np.ndarray, lab: np.ndarray, g: Graph, root: int, grid: BoxGrid, tau: float,
                   o: DecomposeOptions, tree: cKDTree | None = None):
-    """Algorithm 1 step 1 on the shortest paths (leaf edges ``leaf_edge_cost`` longer) to FPS endpoints,
-    then every main branch smoothed (smooth.py, ours).
+    """Algorithm 1 step 1 on the shortest paths (edges touching a leaf point ``leaf_edge_cost`` times longer)
+    to FPS endpoints, then every main branch smoothed (smooth.py, ours). ``merge.select_mains`` may keep
+    fewer than N_m paths when no candidate reaches 2 steps beyond the kept ones.
 
     A path that falls more than ``HOOK_DROP`` of the height below a point it reached before is routed
     again on ``graph.gap_graph`` (every scan gap costs the same per metre), and the new path replaces

@@ -69,7 +69,8 @@ class Decomposition:
     source_index: np.ndarray
     """(N,) int64: index of each point in the input array (of its first row when it was repeated)."""
     adjacency: csr_matrix | None = None
-    """(N, N) the bridged kNN graph with Euclidean weights."""
+    """(N, N) the bridged kNN graph; weights are edge lengths, a mutual neighbour pair counted twice
+    (``graph.knn_graph``)."""
     timing: dict[str, float] = field(default_factory=dict)
     """Seconds per step."""
     stats: dict[str, Any] = field(default_factory=dict)
