@@ -112,9 +112,10 @@ def _failed(path: str, sha256: str, message: str, t0: float) -> ScanOutcome:
 
 
 def _decompose(path: str, sha256: str, options: dict[str, Any], t0: float) -> ScanOutcome:
+    from arboretum_library.errors import InputError
     from arboretum_library.pointio import precision_note, read_points
     from arboretum_server.decompose.examples import counter_ids, make_examples, provenance
-    from arboretum_server.decompose.notes import bare_note, result_notes, up_guess_flat
+    from arboretum_server.decompose.notes import bare_note, refusal, result_notes, up_guess_flat
     from arboretum_server.decompose.options import DecomposeOptions
     from arboretum_server.decompose.pipeline import decompose
 
@@ -124,7 +125,11 @@ def _decompose(path: str, sha256: str, options: dict[str, Any], t0: float) -> Sc
     if why := up_guess_flat(cloud.points, "auto", cloud.up_axis):  # a wall in a Z-up file
         return _failed(path, sha256, f"{why}: a build reads every scan with --up auto; if Z is up in the file, "
                        "decompose it alone: arboretum decompose SCAN --up z --library LIB", t0)
-    dec = decompose(cloud.points, opts, labels=cloud.labels)
+    coarse = precision_note(cloud, points=opts.points)  # the file's own precision: kept with the notes
+    try:
+        dec = decompose(cloud.points, opts, labels=cloud.labels)
+    except InputError as exc:  # on a coarse grid the refusal names the symptom: say the cause too
+        return _failed(path, sha256, refusal(str(exc), coarse), t0)
     t_dec = time.perf_counter()
     prov = provenance(path, opts, sha256=sha256)
     prov = replace(prov, parameters={**prov.parameters, UP_AXIS_KEY: cloud.up_axis})  # as decompose keeps it
@@ -132,7 +137,6 @@ def _decompose(path: str, sha256: str, options: dict[str, Any], t0: float) -> Sc
     if not examples:
         return _failed(path, sha256, "decomposition gave no examples (no main branch found)", t0)
     said = result_notes(opts, dec.stats)  # the species note would repeat for every scan of a species
-    coarse = precision_note(cloud, points=opts.points)  # the file's own precision: kept with the notes
     said = ([coarse] if coarse else []) + said
     params = {**prov.parameters, SCAN_EXAMPLES_KEY: len(examples), NOTES_KEY: list(said)}
     # examples without lobes: said when made, not stored with the notes (the user may delete those

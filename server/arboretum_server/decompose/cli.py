@@ -131,13 +131,13 @@ def run(args: argparse.Namespace) -> int:
             data["notes"] += [surplus] if (surplus := _surplus(lib, there)) else []
             emit(args, data, _text(data))
             return 0
-        dec = _decompose(args.scan, cloud, options, status)
+        coarse = precision_note(cloud, points=options.points)  # float32 at UTM: the points sit on a 0.5 m grid
+        dec = _decompose(args.scan, cloud, options, status, coarse)
         if args.save_hbl:
             _save_hbl(args.save_hbl, dec.hbl)
         stored = _store(lib, dec, args.scan, prov, args.rebuild)
     data = _result(args, options, len(cloud.points), {"read": t_read, **dec.timing}, dec, stored, other)
     bare = bare_note(stored[0], named=bool(stored[1]))  # library ids name them; example-000 would not
-    coarse = precision_note(cloud, points=options.points)  # float32 at UTM: the points sit on a 0.5 m grid
     data["notes"] = ([coarse] if coarse else []) + notes(options, dec.stats) + data["notes"] + ([bare] if bare else [])
     emit(args, data, _text(data))
     return 0
@@ -220,15 +220,16 @@ def _library(path: str | None):
         raise
 
 
-def _decompose(scan: str, cloud, options, status):
+def _decompose(scan: str, cloud, options, status, coarse: str | None):
     from arboretum_library.errors import InputError
 
+    from .notes import refusal
     from .pipeline import decompose
 
     try:
         return decompose(cloud.points, options, status, labels=cloud.labels)
     except InputError as exc:
-        raise InputError(f"{scan}: {exc}") from None
+        raise InputError(refusal(f"{scan}: {exc}", coarse)) from None
 
 
 def _save_hbl(path: str, hbl) -> None:

@@ -46,6 +46,13 @@ def bare_note(examples: list, named: bool = False) -> str | None:
     return f"{len(bare)} of {len(examples)} examples have no lobes{ids}: they grow no twigs or leaves"
 
 
+def refusal(message: str, coarse: str | None) -> str:
+    """A refusal ``message`` with the file's precision note ``coarse`` (``pointio.precision_note``) when
+    it has one: a float32 scan at UTM coordinates sits on a 0.5 m grid and is refused as "2 separate
+    trunks" or "no trunk base", which names the symptom, not the cause."""
+    return f"{message}; the file's precision may be why: {coarse}" if coarse else message
+
+
 def up_guess_flat(points_zup, up_asked: str, up_read: str) -> str | None:
     """Why a cloud read with ``--up auto`` lies at one height when the guess turned it (``up_read``
     'y'), yet the file as written does not (its Z spreads): a vertical wall in a Z-up file reads as Y up
