@@ -41,7 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--modules", metavar="DIR", default=None,
                    help="module folder (.obj/.glb; default assets/modules/default)")
     p.add_argument("--library", metavar="LIB", default=None, help="example library for an Assembly record")
-    p.add_argument("--out", required=True, help="file to write: .glb, .usdc or .usda")
+    p.add_argument("--out", required=True, help="file to write: .glb, .usdc, .usda or .usd (a crate file)")
     p.add_argument("--plain-nodes", action="store_true",
                    help="glTF: one plain node per instance instead of EXT_mesh_gpu_instancing")
     p.add_argument("--types", type=int, default=None, metavar="K",

@@ -97,7 +97,7 @@ def check_format(path: str | os.PathLike, plain: bool = False) -> str:
     """The lower-case suffix of ``path`` if it is a supported format (InputError otherwise)."""
     suffix = Path(path).suffix.lower()
     if suffix not in FORMATS:
-        raise InputError(f"--out {path}: unknown format {suffix!r}; use .glb, .usdc or .usda")
+        raise InputError(f"--out {path}: unknown format {suffix!r}; use .glb, .usdc, .usda or .usd")
     if plain and suffix != ".glb":
         raise InputError(f"--out {path}: --plain-nodes applies to .glb only")
     if not Path(path).resolve().parent.is_dir():
