@@ -14,6 +14,7 @@ from arboretum_library.assets import sample_scans
 from arboretum_library.cli import main
 from arboretum_library.store import Library
 from arboretum_server.decompose.notes import bare_note, height_notes, up_guess_flat
+from factories import float32_ply
 
 COFFEE, PINE = sample_scans()[0], sample_scans()[3]
 
@@ -167,14 +168,6 @@ def test_up_guess_flat_only_for_a_guess_that_flattened():
 # ---------------------------------------------------------------- coordinates too coarse for their size
 
 
-def _ply32(path: Path, pts: np.ndarray) -> Path:
-    body = np.asarray(pts, dtype="<f4")
-    head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(body)}\n"
-            "property float x\nproperty float y\nproperty float z\nend_header\n")
-    path.write_bytes(head.encode() + body.tobytes())
-    return path
-
-
 @pytest.mark.parametrize("offset, noted", [((5e5, 5.4e6, 300.0), True), ((0.0, 0.0, 0.0), False)])
 def test_float32_coordinates_at_utm_are_named(tmp_path, capsys, offset, noted):
     """float32 at 5.4e6 m keeps 0.5 m steps: the coffee tree's points snap to that grid (461 graph
@@ -182,7 +175,7 @@ def test_float32_coordinates_at_utm_are_named(tmp_path, capsys, offset, noted):
     from arboretum_library.pointio import read_points
 
     pts = read_points(COFFEE).points
-    scan = _ply32(tmp_path / "t.ply", pts - pts.min(axis=0) + offset)
+    scan = float32_ply(tmp_path / "t.ply", pts - pts.min(axis=0) + offset)
     data = _run(capsys, scan, "--points", "3000")
     coarse = [n for n in data["notes"] if "float32" in n]
     if noted:

@@ -7,8 +7,6 @@ promise, since the note came after the decomposition (helper-103).
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -17,6 +15,7 @@ from arboretum_library.cli import main
 from arboretum_library.pointio import read_points
 from arboretum_server.batch.tasks import decompose_scan
 from arboretum_server.decompose.notes import refusal
+from factories import float32_ply
 
 UTM = np.array([500_000.0, 5_400_000.0, 300.0])
 
@@ -26,16 +25,8 @@ def coffee() -> np.ndarray:
     return read_points(sample_scans()[0]).points
 
 
-def _ply32(path: Path, pts: np.ndarray) -> Path:
-    body = np.asarray(pts, dtype="<f4")
-    head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(body)}\n"
-            "property float x\nproperty float y\nproperty float z\nend_header\n")
-    path.write_bytes(head.encode() + body.tobytes())
-    return path
-
-
 def test_decompose_says_the_grid_when_it_refuses(tmp_path, capsys, coffee):
-    scan = _ply32(tmp_path / "f32_utm.ply", coffee - coffee.mean(axis=0) + UTM)
+    scan = float32_ply(tmp_path / "f32_utm.ply", coffee - coffee.mean(axis=0) + UTM)
     assert main(["decompose", str(scan)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "separate trunks" in err[0]
@@ -44,7 +35,7 @@ def test_decompose_says_the_grid_when_it_refuses(tmp_path, capsys, coffee):
 
 
 def test_a_build_worker_says_it_too(tmp_path, coffee):
-    scan = _ply32(tmp_path / "f32_utm.ply", coffee - coffee.mean(axis=0) + UTM)
+    scan = float32_ply(tmp_path / "f32_utm.ply", coffee - coffee.mean(axis=0) + UTM)
     out = decompose_scan(str(scan), "ab" * 32, {"species": "unknown"})
     assert out.examples == ()
     assert "separate trunks" in out.error and "are only 0.5 m apart" in out.error
@@ -52,7 +43,7 @@ def test_a_build_worker_says_it_too(tmp_path, coffee):
 
 def test_a_fine_file_is_refused_as_before(tmp_path, capsys, coffee):
     near = coffee - coffee.mean(axis=0)  # float32 near the origin: 1e-7 m steps, no note
-    scan = _ply32(tmp_path / "two.ply", np.concatenate([near, near + [3.0, 0.0, 0.0]]))
+    scan = float32_ply(tmp_path / "two.ply", np.concatenate([near, near + [3.0, 0.0, 0.0]]))
     assert main(["decompose", str(scan)]) == 2
     err = capsys.readouterr().err.strip()
     assert "separate trunks" in err and "precision" not in err
