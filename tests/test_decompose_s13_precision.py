@@ -49,6 +49,24 @@ def test_a_fine_file_is_refused_as_before(tmp_path, capsys, coffee):
     assert "separate trunks" in err and "precision" not in err
 
 
+def test_a_refusal_of_the_options_gets_no_precision_note(tmp_path, capsys, coffee):
+    scan = float32_ply(tmp_path / "f32_utm.ply", coffee - coffee.mean(axis=0) + UTM)
+    assert main(["decompose", str(scan), "--main", "200"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "main branches: 200 asked, at most 96" in err and "precision" not in err
+
+
+def test_a_build_names_the_file_not_its_path_in_the_note(tmp_path, coffee):
+    """The build's line names the path already, and a refusal is cut at 500 characters: with a long path
+    the fix advice at the note's end was cut off (helper-106)."""
+    folder = tmp_path / ("a-rather-long-folder-name-of-scans-" * 4)
+    folder.mkdir()
+    scan = float32_ply(folder / "f32_utm.ply", coffee - coffee.mean(axis=0) + UTM)
+    out = decompose_scan(str(scan), "ab" * 32, {"species": "unknown"})
+    assert str(folder) not in out.error and "'f32_utm.ply': coordinates stored as float32" in out.error
+    assert out.error.endswith("re-export it as float64, or shifted near the origin")
+
+
 def test_refusal_wording():
     assert refusal("x: refused", None) == "x: refused"
     assert refusal("x: refused", "coarse") == "x: refused; the file's precision may be why: coarse"

@@ -125,11 +125,13 @@ def _decompose(path: str, sha256: str, options: dict[str, Any], t0: float) -> Sc
     if why := up_guess_flat(cloud.points, "auto", cloud.up_axis):  # a wall in a Z-up file
         return _failed(path, sha256, f"{why}: a build reads every scan with --up auto; if Z is up in the file, "
                        "decompose it alone: arboretum decompose SCAN --up z --library LIB", t0)
-    coarse = precision_note(cloud, points=opts.points)  # the file's own precision: kept with the notes
+    # the file's own precision, kept with the notes; by file name: the build's line names the path, and a
+    # refusal is cut at 500 characters
+    coarse = precision_note(replace(cloud, source=os.path.basename(path)), points=opts.points)
     try:
         dec = decompose(cloud.points, opts, labels=cloud.labels)
     except InputError as exc:  # on a coarse grid the refusal names the symptom: say the cause too
-        return _failed(path, sha256, refusal(str(exc), coarse), t0)
+        return _failed(path, sha256, refusal(str(exc), coarse, exc), t0)
     t_dec = time.perf_counter()
     prov = provenance(path, opts, sha256=sha256)
     prov = replace(prov, parameters={**prov.parameters, UP_AXIS_KEY: cloud.up_axis})  # as decompose keeps it

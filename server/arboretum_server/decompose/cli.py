@@ -229,7 +229,7 @@ def _decompose(scan: str, cloud, options, status, coarse: str | None):
     try:
         return decompose(cloud.points, options, status, labels=cloud.labels)
     except InputError as exc:
-        raise InputError(refusal(f"{scan}: {exc}", coarse)) from None
+        raise InputError(refusal(f"{scan}: {exc}", coarse, exc)) from None
 
 
 def _save_hbl(path: str, hbl) -> None:

@@ -46,11 +46,16 @@ def bare_note(examples: list, named: bool = False) -> str | None:
     return f"{len(bare)} of {len(examples)} examples have no lobes{ids}: they grow no twigs or leaves"
 
 
-def refusal(message: str, coarse: str | None) -> str:
+def refusal(message: str, coarse: str | None, error: Exception | None = None) -> str:
     """A refusal ``message`` with the file's precision note ``coarse`` (``pointio.precision_note``) when
-    it has one: a float32 scan at UTM coordinates sits on a 0.5 m grid and is refused as "2 separate
-    trunks" or "no trunk base", which names the symptom, not the cause."""
-    return f"{message}; the file's precision may be why: {coarse}" if coarse else message
+    it has one and the refusal is about the points (not a ``preprocess.OptionError``): a float32 scan at
+    UTM coordinates sits on a 0.5 m grid and is refused as "2 separate trunks" or "no trunk base", which
+    names the symptom, not the cause."""
+    from .preprocess import OptionError
+
+    if not coarse or isinstance(error, OptionError):
+        return message
+    return f"{message}; the file's precision may be why: {coarse}"
 
 
 def up_guess_flat(points_zup, up_asked: str, up_read: str) -> str | None:

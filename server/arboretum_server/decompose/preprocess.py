@@ -198,10 +198,15 @@ def prepare(
     if labels is not None and options.use_labels:
         lab = np.asarray(labels).reshape(-1)
         if lab.shape[0] != len(pts):
-            raise InputError(f"labels: {lab.shape[0]} labels for {len(pts)} points")
+            raise OptionError(f"labels: {lab.shape[0]} labels for {len(pts)} points")
         lab = (lab[idx] > 0).astype(np.uint8)
     return Prepared((sub - root) * scale, idx, lab, root, scale, int(ground.sum()), tuple(cols), repeats,
                     int(stray.sum()))
+
+
+class OptionError(InputError):
+    """A refusal of the options or labels given, whatever the points are: no note about the points'
+    precision goes with it (``notes.refusal``)."""
 
 
 def _usable(pts: np.ndarray, options: DecomposeOptions) -> tuple[np.ndarray, Repeats]:
@@ -239,7 +244,7 @@ def check_points(options: DecomposeOptions, name: str = "points") -> None:
     """InputError when downsampling to ``options.points`` leaves too few points (``name``: the option's
     name in the message, e.g. the command's ``--points``)."""
     if 0 < options.points < options.min_points:
-        raise InputError(f"{name} {options.points} leaves too few points to decompose a tree "
+        raise OptionError(f"{name} {options.points} leaves too few points to decompose a tree "
                          f"(at least {options.min_points}, or 0 to keep all)")
 
 
@@ -251,7 +256,7 @@ def _check_counts(n: int, o: DecomposeOptions) -> None:
     """InputError when N_m or N_l cannot be met on ``n`` points."""
     n_main, n_lobes = o.counts()
     if n_main > o.fps_candidates:
-        raise InputError(f"main branches: {n_main} asked, at most {o.fps_candidates} (the candidate paths)")
+        raise OptionError(f"main branches: {n_main} asked, at most {o.fps_candidates} (the candidate paths)")
     if n_lobes > n // POINTS_PER_LOBE:
         raise InputError(f"lobes: {n_lobes} asked for {n} points, at most {n // POINTS_PER_LOBE} "
                          f"({POINTS_PER_LOBE} points per lobe)")
