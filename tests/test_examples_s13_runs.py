@@ -49,3 +49,18 @@ def test_build_counts_only_the_first_examples_run():
     lib = _Lib({"a-000": _prov(), "a-001": _prov(points=5000), "a-002": _prov(), "a-003": _prov(species="oak")})
     assert _one_run(lib, ["a-000", "a-001", "a-002", "a-003"]) == ["a-000", "a-002"]
     assert _one_run(lib, ["a-001", "a-000", "a-002"]) == ["a-001"]
+
+
+def test_an_example_without_an_up_axis_matches_from_either_side():
+    """Build anchors on its first example: an old one (no axis) first must still count the run whole."""
+    lib = _Lib({"a-000": _prov(up=None), "a-001": _prov(up="z"), "a-002": _prov(up="y")})
+    assert _one_run(lib, ["a-001", "a-000"]) == ["a-001", "a-000"]
+    assert _one_run(lib, ["a-000", "a-001", "a-002"]) == ["a-000", "a-001", "a-002"]
+    assert _one_run(lib, ["a-002", "a-000", "a-001"]) == ["a-002", "a-000"]
+
+
+def test_a_whole_number_stored_as_int_is_the_commands_float():
+    """``build_library(BuildOptions(height=2))`` from Python stores 2 where ``decompose --height 2`` has 2.0."""
+    as_int = _prov(height=2.0)
+    as_int = Provenance(as_int.source, as_int.source_sha256, as_int.species, {**as_int.parameters, "height": 2})
+    assert run_key(as_int) == run_key(_prov(height=2.0)) != run_key(_prov(height=3.0))

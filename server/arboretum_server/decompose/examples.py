@@ -69,21 +69,29 @@ RUN_RECORDS = (SCAN_EXAMPLES_KEY, NOTES_KEY)
 
 def run_key(prov: Provenance, up_axis: str | None = None) -> str:
     """What two examples of one file share when one run made them: the species and every decomposition
-    parameter with the up axis (``up_axis`` stands in for one stored without it, so old examples match
-    either axis), as JSON (as meta.json holds them). ``decompose`` stores one file with other options beside
-    a run; ``decompose`` and ``library build`` both tell the runs apart by this."""
-    params = {k: v for k, v in prov.parameters.items() if k not in RUN_RECORDS}
+    parameter with the up axis (``up_axis`` stands in for one stored without it), as JSON, numbers as
+    floats (a height stored as 2 by a Python caller is the command's 2.0). ``decompose`` stores one file
+    with other options beside a run; ``decompose`` and ``library build`` both tell the runs apart by
+    this (``split_runs``)."""
+    params = {k: float(v) if isinstance(v, int | float) and not isinstance(v, bool) else v
+              for k, v in prov.parameters.items() if k not in RUN_RECORDS}
     params.setdefault(UP_AXIS_KEY, up_axis)
     return json.dumps([prov.species, params], sort_keys=True)
 
 
+def same_run(a: Provenance, b: Provenance) -> bool:
+    """Whether ``a`` and ``b`` (examples of one file) come from one run (``run_key``); an example stored
+    without an up axis (before session 12) matches either axis, whichever side it is on."""
+    up = a.parameters.get(UP_AXIS_KEY) or b.parameters.get(UP_AXIS_KEY)
+    return run_key(a, up) == run_key(b, up)
+
+
 def split_runs(lib, ids: list[str], want: Provenance) -> tuple[list[str], list[str]]:
-    """(ids, other ids): ``ids`` (examples of one file in ``lib``) split by whether ``run_key`` matches
-    the run of ``want``."""
-    key = run_key(want)
+    """(ids, other ids): ``ids`` (examples of one file in ``lib``) split by whether they come from the
+    run of ``want`` (``same_run``)."""
     same, other = [], []
     for id_ in ids:
-        (same if run_key(lib.provenance(id_), want.parameters.get(UP_AXIS_KEY)) == key else other).append(id_)
+        (same if same_run(lib.provenance(id_), want) else other).append(id_)
     return same, other
 
 
