@@ -75,7 +75,7 @@ class App:
 
     def __init__(self, renderer, port_factory: Callable[[], SessionPort], out_dir: str | Path = ".",
                  clock: Callable[[], float] = time.monotonic, ui: bool = True,
-                 scan: tuple[np.ndarray, np.ndarray | None] | None = None,
+                 scan: tuple | None = None,  # (points, labels[, file name]) of --scan, refined on Tab
                  reference: Billboard | None = None) -> None:
         self.renderer, self.size = renderer, renderer.size
         self.reference, self.show_reference = reference, True
@@ -143,8 +143,9 @@ class App:
         s.mode = MODELING if s.mode == REFINEMENT else REFINEMENT
         s.selection, s.strokes = [], []
         if s.mode == REFINEMENT and s.draft is None:
-            pts, labels = self.scan if self.scan is not None else (np.zeros((0, 3)), None)
-            self.actions.refine_open(pts, labels)
+            # no scan: the offline session refines its demo tree; a server refuses (said so by refine_open)
+            pts, labels, *name = self.scan if self.scan is not None else (np.zeros((0, 3)), None)
+            self.actions.refine_open(pts, labels, name=name[0] if name else "scan")
         self._framed = False
         s.touch_scene()
 

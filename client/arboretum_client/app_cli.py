@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 
 from arboretum_library.cli import add_json_flag, emit
+from arboretum_library.pointio import UP_CHOICES
 
 
 def register(subparsers) -> None:
@@ -37,6 +38,8 @@ def register(subparsers) -> None:
                    "generate' (its client.key_secret, or its only client secret) or one NAME.key_secret beside server.key")
     p.add_argument("--library", metavar="LIB", help="an existing example library for the embedded server")
     p.add_argument("--scan", metavar="FILE", help="point cloud to refine (refinement mode, Tab)")
+    p.add_argument("--up", choices=UP_CHOICES, default="auto",
+                   help="up axis of the --scan file (default: guessed, as 'arboretum scan info' does)")
     p.add_argument("--size", default="1280x720", help="window or image size WIDTHxHEIGHT (default 1280x720)")
     p.add_argument("--headless", action="store_true", help="render without a display (EGL); needs --script")
     p.add_argument("--script", metavar="S", help="JSON/YAML script of input events and tool actions")
@@ -70,13 +73,14 @@ def _port_factory(args, cleanup: list):
     return lambda: RemoteSession(endpoint, curve=curve)
 
 
-def _scan(path: str | None):
+def _scan(path: str | None, up: str = "auto"):
+    """(points, labels, file name) of ``--scan`` read with ``--up``, or None."""
     if not path:
         return None
-    from arboretum_library.pointio import read_points
+    from arboretum_library.pointio import ReadOptions, read_points
 
-    cloud = read_points(path)
-    return cloud.points, getattr(cloud, "labels", None)
+    cloud = read_points(path, ReadOptions(up=up))
+    return cloud.points, getattr(cloud, "labels", None), Path(path).name
 
 
 def _reference(args):
@@ -148,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
     size = check_args(args)
     args.steps = _script_steps(args)  # checked here: a bad step is one error line before any window
     args.reference_item = _reference(args)  # before the server starts: a bad image is a quick error
-    scan = _scan(args.scan)
+    scan = _scan(args.scan, args.up)
     cleanup: list = []
     try:
         factory = _port_factory(args, cleanup)
@@ -166,6 +170,7 @@ def run(args: argparse.Namespace) -> int:
 def _summary(app, runner_frames: int, shots) -> dict:
     s = app.state
     return {"frames": runner_frames, "placements": len(s.assembly.placements), "revision": s.revision,
+            "refine_revision": s.refine_revision, "lobes": len(s.draft.lobes) if s.draft is not None else None,
             "status": s.status, "errors": s.errors, "screenshots": [str(p) for p in shots],
             "draw_calls": app.renderer.stats.draw_calls, "exported": s.exported}
 

@@ -86,8 +86,9 @@ class SessionPort(Protocol):
 
     # -- refinement --------------------------------------------------------------------------------
     def refine_open(self, points: np.ndarray, labels: np.ndarray | None = None, species: str = "unknown",
-                    progress: ProgressFn = _no_progress) -> RefineState:
-        """Decompose a scan into a draft HBL to refine."""
+                    progress: ProgressFn = _no_progress, name: str = "scan") -> RefineState:
+        """Decompose a scan (``name``: its file name, the committed examples' source) into a draft HBL to
+        refine."""
         ...
 
     def refine_points(self) -> RefineCloud: ...

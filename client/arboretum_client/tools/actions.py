@@ -56,9 +56,14 @@ class Actions:
         return self.worker.submit(name, call, on_done, self._fail(name))
 
     # -- library -----------------------------------------------------------------------------------
-    def refresh_library(self) -> None:
+    def refresh_library(self, quiet: bool = False) -> None:
+        """List the library again; ``quiet`` keeps the status line (a commit's ids stay readable)."""
         tag = self.state.tag_filter
-        self._submit("list library", lambda p, _: p.list_library(tags=(tag,) if tag else ()), self._rows)
+        call = lambda p, _: p.list_library(tags=(tag,) if tag else ())  # noqa: E731
+        if quiet:
+            self.worker.submit("list library", call, self._quiet_rows, self._fail("list library"))
+        else:
+            self._submit("list library", call, self._rows)
 
     def search(self, query: str) -> None:
         self.state.query = query
@@ -74,6 +79,10 @@ class Actions:
     def _rows(self, rows: list[dict]) -> None:
         self.state.library = list(rows)
         self.state.say(f"{len(rows)} examples")
+
+    def _quiet_rows(self, rows: list[dict]) -> None:
+        self.state.library = list(rows)
+        self.state.ui_version += 1
 
     def choose(self, example_id: str) -> None:
         """Choose a library example: fetched into the cache; the next select on empty space places it."""
@@ -222,7 +231,8 @@ class Actions:
         def done(reply: RefineState) -> None:
             s = self.state
             s.draft, s.selection, s.point_selection = reply.hbl, [], np.zeros(0, np.int64)
-            s.can_undo, s.can_redo = reply.can_undo, reply.can_redo
+            s.strokes = []  # used by this edit, or drawn for another: a later split must not reuse them
+            s.can_undo, s.can_redo, s.refine_revision = reply.can_undo, reply.can_redo, reply.revision
             s.say(f"{name}: {len(reply.hbl.lobes)} lobes")
             self.worker.submit("points", lambda p, _: p.refine_points(), self._cloud, self._fail("points"))
             s.touch_scene()
@@ -232,9 +242,17 @@ class Actions:
         self.state.cloud = cloud
         self.state.touch_scene()
 
-    def refine_open(self, points: np.ndarray, labels: np.ndarray | None = None, species: str = "unknown") -> None:
-        self._submit("decompose", lambda p, progress: p.refine_open(points, labels, species, progress),
-                     lambda r: self._refine("open", lambda _p: r))
+    def refine_open(self, points: np.ndarray, labels: np.ndarray | None = None, species: str = "unknown",
+                    name: str = "scan") -> None:
+        self.state.say("decompose...")
+        fail = self._fail("decompose")
+        if not len(points):  # the server's "0 usable points" would not say what is missing
+            def fail(exc: BaseException) -> None:
+                self.state.errors.append(f"decompose: {describe_error(exc)}")
+                self.state.say("refinement: no scan to refine; start the client with --scan FILE")
+        self.worker.submit("decompose", lambda p, progress: p.refine_open(points, labels, species, progress,
+                                                                          name=name),
+                           lambda r: self._refine("open", lambda _p: r), fail)
 
     def remove_lobe(self, lobe: int) -> int:
         return self._refine("remove lobe", lambda p: p.remove_lobe(lobe))
@@ -250,5 +268,8 @@ class Actions:
         return self._refine("split lobe", lambda p: p.split_lobe(lobe, strokes))
 
     def commit_refinement(self) -> None:
+        if self.state.draft is None:
+            self.state.say("commit: no refinement draft (Tab opens the --scan in refinement)")
+            return
         self._submit("commit", lambda p, _: p.refine_commit(),
-                     lambda r: (self.state.say(committed(*r)), self.refresh_library()))
+                     lambda r: (self.state.say(committed(*r)), self.refresh_library(quiet=True)))

@@ -129,14 +129,34 @@ class Interaction:
 
     def _stroke(self, ev: HandEvent) -> None:
         live = self.state.live_stroke
+        at = self._on_cloud(ev.sample)
         if ev.kind == "sketch_start":
-            live[ev.side] = [ev.sample.position.copy()]
+            live[ev.side] = [at]
         elif ev.kind == "sketch_move" and ev.side in live:
-            if np.linalg.norm(live[ev.side][-1] - ev.sample.position) > 1e-4:
-                live[ev.side].append(ev.sample.position.copy())
+            if np.linalg.norm(live[ev.side][-1] - at) > 1e-4:
+                live[ev.side].append(at)
         elif ev.kind == "sketch_end" and ev.side in live:
-            stroke = np.array(live.pop(ev.side) + [ev.sample.position.copy()])
+            stroke = np.array(live.pop(ev.side) + [at])
             self._finish_stroke(stroke)
+
+    def _on_cloud(self, sample) -> np.ndarray:
+        """Where a stroke sample lands: a VR hand where it is; the desktop cursor (a ray) on the scan in
+        refinement, at the cloud point nearest the eye among those within ``brush`` of the ray, so a
+        stroke drawn over the points is on them (on the plane through the camera target it missed lobes
+        off that plane by 0.13-0.16 m: insert selected nothing, split was refused); elsewhere, or with
+        no point under the cursor, on that plane."""
+        at = sample.position.copy()
+        cloud = self.state.cloud
+        if sample.pixel is None or self.state.mode != REFINEMENT or cloud is None or not len(cloud.points):
+            return at
+        d = np.asarray(sample.ray_dir, np.float64)
+        rel = np.asarray(cloud.points, np.float64) - at
+        t = rel @ d
+        off = np.linalg.norm(rel - t[:, None] * d, axis=1)
+        near = np.flatnonzero(off <= self.brush)
+        if not len(near):
+            return at
+        return np.asarray(cloud.points[near[np.argmin(t[near])]], np.float64).copy()
 
     def _finish_stroke(self, stroke: np.ndarray) -> None:
         s = self.state
@@ -158,13 +178,13 @@ class Interaction:
             self.actions.sketch()
             return
         lobes = [int(n[5:]) for n in s.selection if n.startswith("lobe:")]
-        if len(s.point_selection):
-            self.actions.insert_lobe(s.point_selection)
+        if len(lobes) >= 2:  # lobes selected decide: points selected before are for an insert without them
+            self.actions.merge_lobes(lobes)
         elif len(lobes) == 1 and s.strokes:
             strokes, s.strokes = s.strokes, []
             self.actions.split_lobe(lobes[0], strokes)
-        elif len(lobes) >= 2:
-            self.actions.merge_lobes(lobes)
+        elif not lobes and len(s.point_selection):
+            self.actions.insert_lobe(s.point_selection)
         else:
             s.say("touchpad: select points (insert), one lobe and strokes (split) or lobes (merge)")
 
@@ -174,6 +194,8 @@ class Interaction:
             lobes = [int(n[5:]) for n in s.selection if n.startswith("lobe:")]
             if lobes:
                 self.actions.remove_lobe(lobes[0])
+            else:
+                s.say("menu: select a lobe to remove it")
             return
         insts = {parse(n)[0] for n in s.selection} - {None}
         if not insts and s.library:  # nothing selected: browse the library (VR has no panel)

@@ -53,6 +53,8 @@ class ClientState:
     draft: HBL | None = None
     cloud: RefineCloud | None = None
     show_points: bool = True
+    refine_revision: int = 0
+    """Refinement edits so far (the server's ``RefineState.revision``)."""
     point_selection: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     """(M,) indices into the cloud selected for 'insert lobe'."""
     # sketching (both modes)

@@ -7,7 +7,7 @@ rows are as many as fit, and the right-hand legend is dropped when it would cove
 from __future__ import annotations
 
 from arboretum_client.net import JobStatus
-from arboretum_client.tools.state import ClientState
+from arboretum_client.tools.state import REFINEMENT, ClientState
 
 from .widgets import CHAR_W, DIM, LINE_H, TEXT, Canvas
 
@@ -43,7 +43,8 @@ def draw(c: Canvas, s: ClientState, jobs: dict[int, JobStatus]) -> None:
         if bar_x1 - bar_x0 >= MIN_BAR:
             c.bar((bar_x0, y + 3, bar_x1, y + LINE_H - 3), job.fraction)
         y += LINE_H + 4
-    right = f"{s.mode} | rev {s.revision} | left hand blue, right hand red"
+    rev = s.refine_revision if s.mode == REFINEMENT else s.revision
+    right = f"{s.mode} | rev {rev} | left hand blue, right hand red"
     right_x = max(w - 8 * len(right) + 40, w // 2)
     legend = right_x >= MIN_LEGEND_X  # narrower: the legend would cover the message, leave it out
     room = ((right_x if legend else w) - 20) // CHAR_W

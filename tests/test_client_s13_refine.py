@@ -1,0 +1,111 @@
+"""Refinement in the client as a user drives it (session 13, helper-110's hunt): strokes drawn with the
+mouse land on the scan, lobes selected decide the touchpad, a commit's ids stay on the status line, the
+refinement revision is kept, and missing input is said."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from arboretum_library.assets import asset_path
+from arboretum_library.pointio import ReadOptions, read_points
+from test_client_server import client, server  # noqa: F401  (fixtures: a real server, a headless client)
+
+pytestmark = pytest.mark.gl
+
+
+def _open(app, runner):
+    cloud = read_points(asset_path("scans", "01_rtwig_coffeetree", "01_rtwig_coffeetree.xyz"),
+                        ReadOptions(max_points=4000))
+    app.scan = (cloud.points, cloud.labels, "coffee.xyz")
+    runner.run([{"key": "tab"}, {"view": "iso"}])
+    assert app.state.draft is not None
+    return app.state.cloud
+
+
+def _front_lobe(app) -> int:
+    """The lobe with the most points among those nearest the camera."""
+    cloud, eye = app.state.cloud, app.desktop.camera.eye
+    lobes = [j for j in range(len(app.state.draft.lobes)) if (cloud.lobe_of == j).sum() >= 30]
+    return min(lobes, key=lambda j: np.linalg.norm(cloud.points[cloud.lobe_of == j].mean(axis=0) - eye))
+
+
+def _stroke_over(cloud, lobe: int) -> list[list[float]]:
+    """Three points of ``lobe`` along its longest extent."""
+    pts = cloud.points[cloud.lobe_of == lobe]
+    c = pts.mean(axis=0)
+    axis = np.linalg.svd(pts - c)[2][0]
+    order = np.argsort((pts - c) @ axis)
+    return [pts[order[int(f * (len(order) - 1))]].tolist() for f in (0.2, 0.5, 0.8)]
+
+
+def test_a_mouse_stroke_over_the_scan_selects_the_points_under_it(client):  # noqa: F811
+    app, runner = client
+    cloud = _open(app, runner)
+    lobe = _front_lobe(app)
+    stroke = _stroke_over(cloud, lobe)
+    runner.run([{"stroke": stroke}])
+    picked = app.state.point_selection
+    assert len(picked) >= 5  # 0 when the stroke lay on the plane through the camera target
+    gap = np.linalg.norm(cloud.points[picked][:, None] - np.array(stroke)[None], axis=2).min(axis=1)
+    assert np.median(gap) < 0.1
+    before = app.state.refine_revision
+    runner.run([{"key": "enter"}])
+    assert app.state.status.startswith("insert lobe") and app.state.refine_revision == before + 1
+
+
+def test_split_strokes_drawn_over_a_lobe_split_it(client):  # noqa: F811
+    app, runner = client
+    cloud = _open(app, runner)
+    lobe = _front_lobe(app)
+    a, _, b = _stroke_over(cloud, lobe)
+    n = len(app.state.draft.lobes)
+    runner.run([{"select": f"lobe:{lobe}"}, {"stroke": [a, a]}, {"stroke": [b, b]}, {"key": "enter"}])
+    assert app.state.status == f"split lobe: {n + 1} lobes", app.state.status
+
+
+def test_lobes_selected_decide_over_points_selected_before(client):  # noqa: F811
+    app, runner = client
+    _open(app, runner)
+    n = len(app.state.draft.lobes)
+    app.state.point_selection = np.arange(50, dtype=np.int64)
+    runner.run([{"select": ["lobe:1", "lobe:4"]}, {"key": "enter"}])
+    assert len(app.state.draft.lobes) == n - 1 and app.state.status.startswith("merge lobes")
+    assert app.state.strokes == [] and len(app.state.point_selection) == 0
+
+
+def test_a_commit_leaves_its_ids_on_the_status_line(server, client):  # noqa: F811
+    from arboretum_library.remote import Remote
+
+    app, runner = client
+    _open(app, runner)
+    runner.run([{"key": "c"}])
+    first = app.state.status
+    assert first.startswith("stored ") and first.count(",") >= 1, first
+    with Remote(server.endpoint) as r:  # the examples name the scan file, not 'scan'
+        assert r.get_example(first[len("stored "):].split(",")[0].strip()).provenance.source == "coffee.xyz"
+    runner.run([{"key": "c"}])
+    assert "committed already" in app.state.status  # and not "N examples" from the library refresh
+
+
+def test_delete_with_no_lobe_selected_says_what_it_needs(client):  # noqa: F811
+    app, runner = client
+    _open(app, runner)
+    runner.run([{"key": "delete"}])
+    assert app.state.status == "menu: select a lobe to remove it"
+
+
+def test_tab_without_a_scan_says_so(client):  # noqa: F811
+    app, runner = client
+    runner.run([{"key": "tab"}])
+    assert app.state.status == "refinement: no scan to refine; start the client with --scan FILE"
+    assert app.state.draft is None
+
+
+def test_up_axis_of_the_scan_can_be_given():
+    from arboretum_client.app_cli import _scan
+
+    auto, _, _ = _scan(str(asset_path("synth", "guiding_hanging_s2.ply")))
+    z, labels, name = _scan(str(asset_path("synth", "guiding_hanging_s2.ply")), "z")
+    assert round(float(np.ptp(z[:, 2])), 2) == 8.43 and round(float(np.ptp(auto[:, 2])), 2) == 12.2
+    assert name == "guiding_hanging_s2.ply" and int(labels.sum()) == 4586
