@@ -109,3 +109,14 @@ def test_up_axis_of_the_scan_can_be_given():
     z, labels, name = _scan(str(asset_path("synth", "guiding_hanging_s2.ply")), "z")
     assert round(float(np.ptp(z[:, 2])), 2) == 8.43 and round(float(np.ptp(auto[:, 2])), 2) == 12.2
     assert name == "guiding_hanging_s2.ply" and int(labels.sum()) == 4586
+
+
+def test_show_one_names_the_example_shown(client):  # noqa: F811
+    from arboretum_client.ui.refine_panel import _shown
+    from arboretum_library.model import Level
+
+    app, runner = client
+    _open(app, runner)
+    mains = sum(b.level == Level.MAIN for b in app.state.draft.branches)
+    app.state.focus = mains + 1  # N pressed past the last one: the second is shown again
+    assert _shown(app.state) == f"2 of {mains}"

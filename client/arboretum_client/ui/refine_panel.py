@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from arboretum_client.tools.state import ClientState
+from arboretum_library.model import Level
 
 from .widgets import DIM, LINE_H, PANEL_W, PANEL_X, TEXT, Canvas
 
@@ -27,10 +28,16 @@ def draw(c: Canvas, s: ClientState, width: int = PANEL_W, bottom: int | None = N
     rows = [
         [("remove lobe", "menu", False), ("insert / split / merge", "touchpad", False)],
         [("hide points" if s.show_points else "show points", "toggle:show_points", not s.show_points)],
-        [("show all" if s.show_all else f"show one ({s.focus})", "toggle:show_all", not s.show_all),
+        [("show all" if s.show_all else f"show one ({_shown(s)})", "toggle:show_all", not s.show_all),
          ("next", "focus:+", False)],
         [("undo", "undo", False), ("redo", "redo", False)],
         [("commit to library", "commit", False)],
         [("modeling", "mode", False)],
     ]
     y = c.button_rows(x0, y, rows)
+
+
+def _shown(s) -> str:
+    """'K of M': the main branch (example) shown, as ``view._focus_branches`` picks it (focus mod M)."""
+    mains = sum(b.level == Level.MAIN for b in s.draft.branches) if s.draft is not None else 0
+    return f"{s.focus % mains + 1} of {mains}" if mains else str(s.focus)
