@@ -44,11 +44,12 @@ class Actions:
     def __init__(self, state: ClientState, worker: Worker, clock=time.monotonic) -> None:
         self.state, self.worker, self.clock = state, worker, clock
 
-    def _fail(self, what: str):
+    def _fail(self, what: str, say: str | None = None):
+        """An error handler: the error kept in ``errors``, the status line ``say`` or 'WHAT failed: ...'."""
         def on_error(exc: BaseException) -> None:
             text = describe_error(exc)
             self.state.errors.append(f"{what}: {text}")
-            self.state.say(f"{what} failed: {text}")
+            self.state.say(say or f"{what} failed: {text}")
         return on_error
 
     def _submit(self, name: str, call, on_done) -> int:
@@ -59,7 +60,9 @@ class Actions:
     def refresh_library(self, quiet: bool = False) -> None:
         """List the library again; ``quiet`` keeps the status line (a commit's ids stay readable)."""
         tag = self.state.tag_filter
-        call = lambda p, _: p.list_library(tags=(tag,) if tag else ())  # noqa: E731
+
+        def call(port, _):
+            return port.list_library(tags=(tag,) if tag else ())
         if quiet:
             self.worker.submit("list library", call, self._quiet_rows, self._fail("list library"))
         else:
@@ -244,15 +247,12 @@ class Actions:
 
     def refine_open(self, points: np.ndarray, labels: np.ndarray | None = None, species: str = "unknown",
                     name: str = "scan") -> None:
+        # without a scan the server's "0 usable points" would not say what is missing
+        missing = None if len(points) else "refinement: no scan to refine; start the client with --scan FILE"
         self.state.say("decompose...")
-        fail = self._fail("decompose")
-        if not len(points):  # the server's "0 usable points" would not say what is missing
-            def fail(exc: BaseException) -> None:
-                self.state.errors.append(f"decompose: {describe_error(exc)}")
-                self.state.say("refinement: no scan to refine; start the client with --scan FILE")
         self.worker.submit("decompose", lambda p, progress: p.refine_open(points, labels, species, progress,
                                                                           name=name),
-                           lambda r: self._refine("open", lambda _p: r), fail)
+                           lambda r: self._refine("open", lambda _p: r), self._fail("decompose", missing))
 
     def remove_lobe(self, lobe: int) -> int:
         return self._refine("remove lobe", lambda p: p.remove_lobe(lobe))
