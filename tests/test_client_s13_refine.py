@@ -105,8 +105,9 @@ def test_tab_without_a_scan_says_so(client):  # noqa: F811
 def test_up_axis_of_the_scan_can_be_given():
     from arboretum_client.app_cli import _scan
 
-    auto, _, _ = _scan(str(asset_path("synth", "guiding_hanging_s2.ply")))
-    z, labels, name = _scan(str(asset_path("synth", "guiding_hanging_s2.ply")), "z")
+    auto = _scan(str(asset_path("synth", "guiding_hanging_s2.ply"))).points
+    z, labels, name, species, options = _scan(str(asset_path("synth", "guiding_hanging_s2.ply")), "z", "pine", 3)
+    assert (species, options) == ("pine", {"n_main": 3})
     assert round(float(np.ptp(z[:, 2])), 2) == 8.43 and round(float(np.ptp(auto[:, 2])), 2) == 12.2
     assert name == "guiding_hanging_s2.ply" and int(labels.sum()) == 4586
 
@@ -120,3 +121,30 @@ def test_show_one_names_the_example_shown(client):  # noqa: F811
     mains = sum(b.level == Level.MAIN for b in app.state.draft.branches)
     app.state.focus = mains + 1  # N pressed past the last one: the second is shown again
     assert _shown(app.state) == f"2 of {mains}"
+
+
+def test_species_and_counts_of_the_scan_reach_the_server(client):  # noqa: F811
+    """A pine refined with its Table 2 counts, or with --main/--lobes (the client always asked for 8 and 40)."""
+    from arboretum_library.model import Level
+
+    app, runner = client
+    cloud = read_points(asset_path("scans", "01_rtwig_coffeetree", "01_rtwig_coffeetree.xyz"),
+                        ReadOptions(max_points=4000))
+    from arboretum_client.app import Scan
+
+    app.scan = Scan(cloud.points, cloud.labels, "coffee.xyz", "unknown", {"n_main": 3, "n_lobes": 12})
+    runner.run([{"key": "tab"}])
+    draft = app.state.draft
+    assert len(draft.lobes) == 12 and sum(b.level == Level.MAIN for b in draft.branches) == 3
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--main", "3"], "--main apply to the --scan file, and no --scan was given"),
+    (["--species", "pine", "--up", "z"], "--species, --up apply to the --scan file"),
+    (["--scan", "x.xyz", "--lobes", "0"], "--lobes must be at least 1, got 0"),
+])
+def test_scan_options_without_a_scan_or_out_of_range_are_refused(argv, message, capsys):
+    from arboretum_library.cli import main
+
+    assert main(["client", "--offline", "--headless", "--script", "s.json", *argv]) == 2
+    assert message in capsys.readouterr().err

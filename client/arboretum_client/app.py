@@ -19,6 +19,7 @@ import dataclasses
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -70,12 +71,23 @@ def reference_billboard(image: np.ndarray, height: float = 1.0) -> Billboard:
     return Billboard(image, (0.0, REFERENCE_BEHIND * height, height / 2), height * w / h, height)
 
 
+class Scan(NamedTuple):
+    """What ``--scan`` gives refinement: the points (N, 3) and labels, the file's name (the committed
+    examples' source), the species and ``DecomposeOptions`` fields (``--main``, ``--lobes``)."""
+
+    points: np.ndarray
+    labels: np.ndarray | None
+    name: str = "scan"
+    species: str = "unknown"
+    options: dict = {}
+
+
 class App:
     """One client: state, worker, tools, desktop input and a renderer."""
 
     def __init__(self, renderer, port_factory: Callable[[], SessionPort], out_dir: str | Path = ".",
                  clock: Callable[[], float] = time.monotonic, ui: bool = True,
-                 scan: tuple | None = None,  # (points, labels[, file name]) of --scan, refined on Tab
+                 scan: tuple | None = None,  # a Scan (or its first fields) of --scan, refined on Tab
                  reference: Billboard | None = None) -> None:
         self.renderer, self.size = renderer, renderer.size
         self.reference, self.show_reference = reference, True
@@ -144,8 +156,8 @@ class App:
         s.selection, s.strokes = [], []
         if s.mode == REFINEMENT and s.draft is None:
             # no scan: the offline session refines its demo tree; a server refuses (said so by refine_open)
-            pts, labels, *name = self.scan if self.scan is not None else (np.zeros((0, 3)), None)
-            self.actions.refine_open(pts, labels, name=name[0] if name else "scan")
+            scan = Scan(*self.scan) if self.scan is not None else Scan(np.zeros((0, 3)), None)
+            self.actions.refine_open(scan.points, scan.labels, scan.species, scan.name, scan.options)
         self._framed = False
         s.touch_scene()
 

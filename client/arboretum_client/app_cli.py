@@ -40,6 +40,10 @@ def register(subparsers) -> None:
     p.add_argument("--scan", metavar="FILE", help="point cloud to refine (refinement mode, Tab)")
     p.add_argument("--up", choices=UP_CHOICES, default="auto",
                    help="up axis of the --scan file (default: guessed, as 'arboretum scan info' does)")
+    p.add_argument("--species", default="unknown",
+                   help="species of the --scan tree: N_m and N_l from VRTree Table 2 (default: unknown, 8 and 40)")
+    p.add_argument("--main", type=int, metavar="N", help="main branches of the --scan decomposition (overrides --species)")
+    p.add_argument("--lobes", type=int, metavar="N", help="lobes of the --scan decomposition (overrides --species)")
     p.add_argument("--size", default="1280x720", help="window or image size WIDTHxHEIGHT (default 1280x720)")
     p.add_argument("--headless", action="store_true", help="render without a display (EGL); needs --script")
     p.add_argument("--script", metavar="S", help="JSON/YAML script of input events and tool actions")
@@ -73,14 +77,19 @@ def _port_factory(args, cleanup: list):
     return lambda: RemoteSession(endpoint, curve=curve)
 
 
-def _scan(path: str | None, up: str = "auto"):
-    """(points, labels, file name) of ``--scan`` read with ``--up``, or None."""
+def _scan(path: str | None, up: str = "auto", species: str = "unknown", main: int | None = None,
+          lobes: int | None = None):
+    """The ``app.Scan`` of ``--scan`` read with ``--up``, with ``--species``, ``--main`` and ``--lobes``,
+    or None. The counts are checked by the server when Tab opens the scan (one status line)."""
     if not path:
         return None
     from arboretum_library.pointio import ReadOptions, read_points
 
+    from .app import Scan
+
     cloud = read_points(path, ReadOptions(up=up))
-    return cloud.points, getattr(cloud, "labels", None), Path(path).name
+    options = {k: v for k, v in (("n_main", main), ("n_lobes", lobes)) if v is not None}
+    return Scan(cloud.points, getattr(cloud, "labels", None), Path(path).name, species, options)
 
 
 def _reference(args):
@@ -112,6 +121,15 @@ def check_args(args: argparse.Namespace) -> tuple[int, int]:
     size = parse_size(args.size)
     if args.headless and not args.script:
         raise InputError("--headless needs --script S (there is no one to click)")
+    counts = {k: getattr(args, k, None) for k in ("main", "lobes")}
+    given = [f"--{k}" for k, v in counts.items() if v is not None]
+    given += ["--species"] * (getattr(args, "species", "unknown") != "unknown")
+    given += ["--up"] * (getattr(args, "up", "auto") != "auto")
+    if given and not getattr(args, "scan", None):
+        raise InputError(f"{', '.join(given)} apply to the --scan file, and no --scan was given")
+    for k, v in counts.items():
+        if v is not None and v < 1:
+            raise InputError(f"--{k} must be at least 1, got {v}")
     if args.connect is not None:
         m = ENDPOINT.fullmatch(args.connect.strip())
         if m is None or (m.group(2) is not None and not 0 < int(m.group(2)) < 65536):
@@ -152,7 +170,7 @@ def run(args: argparse.Namespace) -> int:
     size = check_args(args)
     args.steps = _script_steps(args)  # checked here: a bad step is one error line before any window
     args.reference_item = _reference(args)  # before the server starts: a bad image is a quick error
-    scan = _scan(args.scan, args.up)
+    scan = _scan(args.scan, args.up, args.species, args.main, args.lobes)
     cleanup: list = []
     try:
         factory = _port_factory(args, cleanup)

@@ -206,7 +206,8 @@ class FakeSession:
         return self._draft
 
     def refine_open(self, points: np.ndarray, labels: np.ndarray | None = None, species: str = "unknown",
-                    progress: ProgressFn = _no_progress, name: str = "scan") -> RefineState:
+                    progress: ProgressFn = _no_progress, name: str = "scan",
+                    options: dict | None = None) -> RefineState:
         from .demo import demo_tree
 
         progress(0, 1, "decompose")

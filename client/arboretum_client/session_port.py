@@ -86,9 +86,10 @@ class SessionPort(Protocol):
 
     # -- refinement --------------------------------------------------------------------------------
     def refine_open(self, points: np.ndarray, labels: np.ndarray | None = None, species: str = "unknown",
-                    progress: ProgressFn = _no_progress, name: str = "scan") -> RefineState:
-        """Decompose a scan (``name``: its file name, the committed examples' source) into a draft HBL to
-        refine."""
+                    progress: ProgressFn = _no_progress, name: str = "scan",
+                    options: dict | None = None) -> RefineState:
+        """Decompose a scan (``name``: its file name, the committed examples' source; ``options``:
+        ``DecomposeOptions`` fields, e.g. n_main, n_lobes) into a draft HBL to refine."""
         ...
 
     def refine_points(self) -> RefineCloud: ...

@@ -82,9 +82,10 @@ class RemoteSession:
 
     # -- refinement --------------------------------------------------------------------------------
     def refine_open(self, points: np.ndarray, labels: np.ndarray | None = None, species: str = "unknown",
-                    progress: ProgressFn = _no_progress, name: str = "scan") -> P.RefineState:
+                    progress: ProgressFn = _no_progress, name: str = "scan",
+                    options: dict | None = None) -> P.RefineState:
         req = P.RefineOpen(session=self.session, points=np.asarray(points, np.float64), labels=labels,
-                           species=species, name=name)
+                           species=species, name=name, options=dict(options or {}))
         return self.remote.call(req, progress=progress, timeout=LONG_TIMEOUT)
 
     def refine_points(self) -> P.RefineCloud:

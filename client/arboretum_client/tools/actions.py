@@ -246,12 +246,12 @@ class Actions:
         self.state.touch_scene()
 
     def refine_open(self, points: np.ndarray, labels: np.ndarray | None = None, species: str = "unknown",
-                    name: str = "scan") -> None:
+                    name: str = "scan", options: dict | None = None) -> None:
         # without a scan the server's "0 usable points" would not say what is missing
         missing = None if len(points) else "refinement: no scan to refine; start the client with --scan FILE"
         self.state.say("decompose...")
         self.worker.submit("decompose", lambda p, progress: p.refine_open(points, labels, species, progress,
-                                                                          name=name),
+                                                                          name=name, options=options),
                            lambda r: self._refine("open", lambda _p: r), self._fail("decompose", missing))
 
     def remove_lobe(self, lobe: int) -> int:
