@@ -148,3 +148,15 @@ def test_scan_options_without_a_scan_or_out_of_range_are_refused(argv, message, 
 
     assert main(["client", "--offline", "--headless", "--script", "s.json", *argv]) == 2
     assert message in capsys.readouterr().err
+
+
+def test_a_select_after_a_failed_open_says_why_the_scene_is_empty(client):  # noqa: F811
+    from arboretum_library.errors import InputError
+
+    app, runner = client
+    tiny = read_points(asset_path("scans", "01_rtwig_coffeetree", "01_rtwig_coffeetree.xyz"),
+                       ReadOptions(max_points=300)).points
+    app.scan = (tiny, None, "tiny.xyz")
+    with pytest.raises(InputError) as err:
+        runner.run([{"key": "tab"}, {"select": "lobe:1"}])
+    assert "nothing is pickable now; decompose failed: lobes: 40 asked for 300 points" in str(err.value)

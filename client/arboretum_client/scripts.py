@@ -130,7 +130,8 @@ class ScriptRunner:
             scene = set(self.app.names.values())
             for n in [arg] if isinstance(arg, str) else arg:
                 if n not in scene and not any(m.startswith(n + "/") for m in scene):
-                    shown = f"e.g. {', '.join(sorted(scene)[:8])}" if scene else "nothing is pickable now"
+                    # an empty scene: say why, e.g. a refinement draft that could not be opened
+                    shown = f"e.g. {', '.join(sorted(scene)[:8])}" if scene else f"nothing is pickable now; {s.status}"
                     return f"nothing named {n!r} in the scene ({shown})"
         return None
 
