@@ -160,3 +160,12 @@ def test_a_select_after_a_failed_open_says_why_the_scene_is_empty(client):  # no
     with pytest.raises(InputError) as err:
         runner.run([{"key": "tab"}, {"select": "lobe:1"}])
     assert "nothing is pickable now; decompose failed: lobes: 40 asked for 300 points" in str(err.value)
+
+
+def test_points_selected_do_not_survive_a_visit_to_modeling(client):  # noqa: F811
+    """helper-110: a stroke's points kept through Tab -> modeling -> Tab could be inserted much later."""
+    app, runner = client
+    _open(app, runner)
+    app.state.point_selection = np.arange(50, dtype=np.int64)
+    runner.run([{"key": "tab"}, {"key": "tab"}])
+    assert app.state.mode == "refinement" and len(app.state.point_selection) == 0

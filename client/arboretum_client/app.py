@@ -153,7 +153,7 @@ class App:
     def toggle_mode(self) -> None:
         s = self.state
         s.mode = MODELING if s.mode == REFINEMENT else REFINEMENT
-        s.selection, s.strokes = [], []
+        s.clear_picks()
         if s.mode == REFINEMENT and s.draft is None:
             # no scan: the offline session refines its demo tree; a server refuses (said so by refine_open)
             scan = Scan(*self.scan) if self.scan is not None else Scan(np.zeros((0, 3)), None)
@@ -177,9 +177,7 @@ class App:
     def _shortcuts(self) -> None:
         for key in self.desktop.take_keys():
             if key == "escape":
-                self.state.selection, self.state.strokes = [], []
-                self.state.point_selection = np.zeros(0, np.int64)
-                self.state.touch_scene()
+                self.state.clear_picks()
             elif key in self.KEYS:
                 self.ui_action(self.KEYS[key])
 

@@ -74,6 +74,13 @@ class ClientState:
         self.scene_version += 1
         self.ui_version += 1
 
+    def clear_picks(self) -> None:
+        """Forget what is selected and drawn: lobes or examples, points, finished strokes (Esc, a mode
+        switch: points selected in one visit to refinement must not be inserted in the next)."""
+        self.selection, self.strokes = [], []
+        self.point_selection = np.zeros(0, np.int64)
+        self.touch_scene()
+
     def say(self, text: str) -> None:
         self.status = text
         self.ui_version += 1
