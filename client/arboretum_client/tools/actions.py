@@ -52,9 +52,10 @@ class Actions:
             self.state.say(say or f"{what} failed: {text}")
         return on_error
 
-    def _submit(self, name: str, call, on_done) -> int:
+    def _submit(self, name: str, call, on_done, failed: str | None = None) -> int:
+        """Run ``call`` on the worker, saying so; ``failed``: the status line if it fails (``_fail``)."""
         self.state.say(f"{name}...")
-        return self.worker.submit(name, call, on_done, self._fail(name))
+        return self.worker.submit(name, call, on_done, self._fail(name, failed))
 
     # -- library -----------------------------------------------------------------------------------
     def refresh_library(self, quiet: bool = False) -> None:
@@ -249,10 +250,9 @@ class Actions:
                     name: str = "scan", options: dict | None = None) -> None:
         # without a scan the server's "0 usable points" would not say what is missing
         missing = None if len(points) else "refinement: no scan to refine; start the client with --scan FILE"
-        self.state.say("decompose...")
-        self.worker.submit("decompose", lambda p, progress: p.refine_open(points, labels, species, progress,
-                                                                          name=name, options=options),
-                           lambda r: self._refine("open", lambda _p: r), self._fail("decompose", missing))
+        self._submit("decompose", lambda p, progress: p.refine_open(points, labels, species, progress, name=name,
+                                                                    options=options),
+                     lambda r: self._refine("open", lambda _p: r), missing)
 
     def remove_lobe(self, lobe: int) -> int:
         return self._refine("remove lobe", lambda p: p.remove_lobe(lobe))
