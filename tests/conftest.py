@@ -37,3 +37,11 @@ def rng() -> np.random.Generator:
 def scans_dir() -> Path:
     """Bundled copies of the real scans (assets/scans), each with its licence."""
     return assets_dir() / "scans"
+
+
+@pytest.fixture
+def folders(tmp_path):
+    """(library, state) folders of a service under test (``factories.service_folders``)."""
+    from factories import service_folders
+
+    return service_folders(tmp_path)

@@ -8,7 +8,6 @@ import os
 from dataclasses import replace
 
 import numpy as np
-import pytest
 
 from arboretum_library import protocol as P
 from arboretum_library.model import Provenance
@@ -19,17 +18,9 @@ from factories import (
     make_example,
     open_toy_draft,
     reply_of,
-    service_folders,
 )
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-
-ok = reply_of
-
-
-@pytest.fixture
-def folders(tmp_path):
-    return service_folders(tmp_path)
 
 
 open_draft = open_toy_draft
@@ -57,25 +48,25 @@ def test_a_commit_reads_no_catalog_rows(folders, monkeypatch):
     from arboretum_library import catalog
 
     with dispatcher(*folders) as server:
-        sid = open_draft(server)
-        first = ok(server, P.RefineCommit(session=sid)).ids
+        sid = open_toy_draft(server)
+        first = reply_of(server, P.RefineCommit(session=sid)).ids
 
         def no_select(*a, **k):
             raise AssertionError("refine.commit read the catalog rows of the species")
 
         monkeypatch.setattr(catalog, "select", no_select)  # HEAD: lib.entries(species=...) on every commit
-        again = ok(server, P.RefineCommit(session=sid))
+        again = reply_of(server, P.RefineCommit(session=sid))
         assert again.ids == first and "committed already" in again.notes[-1]
 
 
 def test_a_tree_stored_by_another_writer_during_a_commit_is_not_stored_again(folders, monkeypatch):
     with dispatcher(*folders) as server:
-        sid = open_draft(server)
-        first = ok(server, P.RefineCommit(session=sid)).ids
+        sid = open_toy_draft(server)
+        first = reply_of(server, P.RefineCommit(session=sid)).ids
         with Library.open(folders[1]) as lib:
             tree = [lib.get(i) for i in first]
         for i in first:
-            ok(server, P.LibraryDelete(id=i))
+            reply_of(server, P.LibraryDelete(id=i))
         armed = [True]
         read = Library._read
 
@@ -88,7 +79,7 @@ def test_a_tree_stored_by_another_writer_during_a_commit_is_not_stored_again(fol
             return out
 
         monkeypatch.setattr(Library, "_read", read_then_other_writer)
-        again = ok(server, P.RefineCommit(session=sid))
+        again = reply_of(server, P.RefineCommit(session=sid))
         assert not armed  # the other writer did store the tree meanwhile
         others = ("other-0001", "other-0002", "other-0003")
         assert library_ids(server) == list(others)  # HEAD: 6, the tree twice

@@ -21,22 +21,10 @@ from factories import (
     dispatcher,
     open_toy_draft,
     reply_of,
-    service_folders,
     toy_cloud,
 )
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-
-ok = reply_of
-OPTIONS = TOY_DRAFT_OPTIONS
-
-
-@pytest.fixture
-def folders(tmp_path):
-    return service_folders(tmp_path)
-
-
-toy, open_draft = toy_cloud, open_toy_draft
 
 
 def refine_files(folders, sid: str) -> dict[str, bytes]:
@@ -75,7 +63,7 @@ def save_as_version(path, version: int) -> None:
 # -- 1. a draft of another decomposition version -------------------------------------------------------
 def test_a_new_draft_records_the_running_version(folders):
     with dispatcher(*folders) as server:
-        sid = open_draft(server)
+        sid = open_toy_draft(server)
     assert DECOMPOSE_VERSION == 2
     assert load_record(folders[0] / "sessions" / f"{sid}.refine.npz", RefineSource).version == 2
 
@@ -83,8 +71,8 @@ def test_a_new_draft_records_the_running_version(folders):
 @pytest.mark.parametrize("version, made", [(1, "an older"), (3, "a newer")])
 def test_a_draft_of_another_version_is_not_replayed_and_its_files_are_kept(folders, version, made):
     with dispatcher(*folders) as server:
-        sid = open_draft(server)
-        ok(server, P.RemoveLobe(session=sid, lobe=0))
+        sid = open_toy_draft(server)
+        reply_of(server, P.RemoveLobe(session=sid, lobe=0))
     save_as_version(folders[0] / "sessions" / f"{sid}.refine.npz", version)
     before = refine_files(folders, sid)
     assert sorted(before) == [f"{sid}.refine.journal", f"{sid}.refine.npz"]
@@ -97,12 +85,12 @@ def test_a_draft_of_another_version_is_not_replayed_and_its_files_are_kept(folde
                     P.RefineCommit(session=sid), P.RefinePoints(session=sid)):
             err = error_of(server, req)
             assert (err.code, err.message) == ("bad_input", said)
-        assert ok(server, P.LibraryList()).entries == ()
+        assert reply_of(server, P.LibraryList()).entries == ()
         assert refine_files(folders, sid) == before  # nothing rewritten, nothing deleted
-        pts, labels = toy()
-        state = ok(server, P.RefineOpen(session=sid, points=pts, labels=labels, name="toy", options=OPTIONS))
+        pts, labels = toy_cloud()
+        state = reply_of(server, P.RefineOpen(session=sid, points=pts, labels=labels, name="toy", options=TOY_DRAFT_OPTIONS))
         assert state.revision == 0 and not state.can_undo  # started over
-        assert ok(server, P.RemoveLobe(session=sid, lobe=0)).revision == 1
+        assert reply_of(server, P.RemoveLobe(session=sid, lobe=0)).revision == 1
     assert load_record(folders[0] / "sessions" / f"{sid}.refine.npz", RefineSource).version == 2
 
 
@@ -116,9 +104,9 @@ def repeated_strokes(cloud: P.RefineCloud, lobe: int) -> dict:
 
 def test_a_replay_failing_at_an_edit_keeps_the_edits_before_it(folders):
     with dispatcher(*folders) as server:
-        sid = open_draft(server)
-        ok(server, P.RemoveLobe(session=sid, lobe=0))
-        kept = ok(server, P.RefinePoints(session=sid))
+        sid = open_toy_draft(server)
+        reply_of(server, P.RemoveLobe(session=sid, lobe=0))
+        kept = reply_of(server, P.RefinePoints(session=sid))
         arrays = repeated_strokes(kept, 0)
         refused = error_of(server, P.SplitLobe(session=sid, lobe=0, seed=0, **arrays)).message
     folder = folders[0] / "sessions"
@@ -132,26 +120,26 @@ def test_a_replay_failing_at_an_edit_keeps_the_edits_before_it(folders):
         assert err.message == (f"the saved refinement draft could not be rebuilt past edit 2 of 3 (split_lobe: "
                                f"{refused}); it was kept as it was before that edit (1 edit replayed, 2 dropped); "
                                "this request was not run: send it again if it still applies")
-        now = ok(server, P.RefinePoints(session=sid))
+        now = reply_of(server, P.RefinePoints(session=sid))
         assert np.array_equal(now.lobe_of, kept.lobe_of) and np.array_equal(now.points, kept.points)
-        assert ok(server, P.MergeLobes(session=sid, lobes=(0, 1))).revision == 2
-        merged = ok(server, P.RefinePoints(session=sid))
+        assert reply_of(server, P.MergeLobes(session=sid, lobes=(0, 1))).revision == 2
+        merged = reply_of(server, P.RefinePoints(session=sid))
     assert (folder / f"{sid}.refine.journal").read_bytes().startswith(journal)  # the old entries are kept
     with dispatcher(*folders) as server:  # rebuilt again, without error: the kept edit and the new one
-        again = ok(server, P.RefinePoints(session=sid))
+        again = reply_of(server, P.RefinePoints(session=sid))
         assert np.array_equal(again.lobe_of, merged.lobe_of)
-        undone = ok(server, P.RefineUndo(session=sid))
+        undone = reply_of(server, P.RefineUndo(session=sid))
         assert undone.revision == 3 and undone.can_undo  # two edits replayed
-        assert np.array_equal(ok(server, P.RefinePoints(session=sid)).lobe_of, kept.lobe_of)
+        assert np.array_equal(reply_of(server, P.RefinePoints(session=sid)).lobe_of, kept.lobe_of)
 
 
 def test_decompose_job_reports_the_edit_it_stopped_at():
     from arboretum_server.service.handlers.refine import decompose_job
 
-    pts, labels = toy()
+    pts, labels = toy_cloud()
     edits = ({"kind": "remove_lobe", "args": {"lobe": 0}}, {"kind": "merge_lobes", "args": {"lobes": [0, 99]}},
              {"kind": "undo", "args": {}})
-    r = decompose_job(lambda *a: None, pts, labels, "unknown", OPTIONS, edits)
+    r = decompose_job(lambda *a: None, pts, labels, "unknown", TOY_DRAFT_OPTIONS, edits)
     assert (len(r["states"]), r["index"], r["revision"]) == (2, 1, 1)
     assert r["failed"]["done"] == 1 and r["failed"]["kind"] == "merge_lobes" and "99" in r["failed"]["error"]
 
@@ -159,16 +147,16 @@ def test_decompose_job_reports_the_edit_it_stopped_at():
 # -- 3. a torn journal tail ---------------------------------------------------------------------------
 def test_edits_after_a_torn_journal_tail_are_read_back(folders):
     with dispatcher(*folders) as server:
-        sid = open_draft(server)
-        ok(server, P.RemoveLobe(session=sid, lobe=0))
+        sid = open_toy_draft(server)
+        reply_of(server, P.RemoveLobe(session=sid, lobe=0))
     with open(folders[0] / "sessions" / f"{sid}.refine.journal", "ab") as fh:
         fh.write(b"\x40\x00\x00")  # a kill during an append
     with dispatcher(*folders) as server:
-        assert ok(server, P.RemoveLobe(session=sid, lobe=0)).revision == 2
-        two = ok(server, P.RefinePoints(session=sid))
+        assert reply_of(server, P.RemoveLobe(session=sid, lobe=0)).revision == 2
+        two = reply_of(server, P.RefinePoints(session=sid))
     with dispatcher(*folders) as server:  # HEAD: the second edit was behind the torn bytes, unread
-        assert np.array_equal(ok(server, P.RefinePoints(session=sid)).lobe_of, two.lobe_of)
-        assert ok(server, P.RefineUndo(session=sid)).revision == 3
+        assert np.array_equal(reply_of(server, P.RefinePoints(session=sid)).lobe_of, two.lobe_of)
+        assert reply_of(server, P.RefineUndo(session=sid)).revision == 3
 
 
 def test_a_passing_failure_during_a_replay_keeps_the_whole_journal(folders, monkeypatch):
@@ -178,9 +166,9 @@ def test_a_passing_failure_during_a_replay_keeps_the_whole_journal(folders, monk
     import arboretum_server.service.handlers.refine as handlers
 
     with dispatcher(*folders) as server:
-        sid = open_draft(server)
+        sid = open_toy_draft(server)
         for _ in range(3):
-            last = ok(server, P.RemoveLobe(session=sid, lobe=0))
+            last = reply_of(server, P.RemoveLobe(session=sid, lobe=0))
     assert last.revision == 3
     journal = (folders[0] / "sessions" / f"{sid}.refine.journal").read_bytes()
     real, calls = handlers.apply_edit, []
@@ -197,7 +185,7 @@ def test_a_passing_failure_during_a_replay_keeps_the_whole_journal(folders, monk
     assert (folders[0] / "sessions" / f"{sid}.refine.journal").read_bytes() == journal
     monkeypatch.setattr(handlers, "apply_edit", real)
     with dispatcher(*folders) as server:  # memory back: all three edits
-        assert ok(server, P.RefineUndo(session=sid)).revision == 4
+        assert reply_of(server, P.RefineUndo(session=sid)).revision == 4
 
 
 def test_requests_waiting_on_a_failed_rebuild_are_all_refused(folders):
@@ -206,8 +194,8 @@ def test_requests_waiting_on_a_failed_rebuild_are_all_refused(folders):
     from arboretum_server.service.jobs import call_target
 
     with dispatcher(*folders) as server:
-        sid = open_draft(server)
-        ok(server, P.RemoveLobe(session=sid, lobe=0))
+        sid = open_toy_draft(server)
+        reply_of(server, P.RemoveLobe(session=sid, lobe=0))
     folder = folders[0] / "sessions"
     gen = load_record(folder / f"{sid}.refine.npz", RefineSource).generation
     refine_store.append(folder, sid, gen, "merge_lobes", {"lobes": [0, 99]})  # refused on replay
@@ -217,5 +205,5 @@ def test_requests_waiting_on_a_failed_rebuild_are_all_refused(folders):
         for j, r in zip(jobs, results):
             with pytest.raises(InputError, match="could not be rebuilt past edit 2 of 2"):
                 j.finish(r)
-        undone = ok(server, P.RefineUndo(session=sid))
+        undone = reply_of(server, P.RefineUndo(session=sid))
         assert (undone.revision, undone.can_undo) == (2, False)  # one edit kept (revision 1), none run since

@@ -16,19 +16,10 @@ from factories import (
     library_ids,
     open_toy_draft,
     reply_of,
-    service_folders,
     toy_cloud,
 )
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-
-ok = reply_of
-OPTIONS = TOY_DRAFT_OPTIONS
-
-
-@pytest.fixture
-def folders(tmp_path):
-    return service_folders(tmp_path)
 
 
 @pytest.fixture
@@ -37,25 +28,22 @@ def server(folders):
         yield d
 
 
-toy, open_draft = toy_cloud, open_toy_draft
-
-
 def repeat_note(reply) -> bool:
     return any(P.ALREADY_COMMITTED in n for n in reply.notes)
 
 
 # -- 1. a tree already in the library is not stored again -------------------------------------------
 def test_undo_and_redo_back_to_committed_trees_store_nothing(server):
-    sid = open_draft(server)
-    first = ok(server, P.RefineCommit(session=sid))
-    ok(server, P.RemoveLobe(session=sid, lobe=0))
-    edited = ok(server, P.RefineCommit(session=sid))
+    sid = open_toy_draft(server)
+    first = reply_of(server, P.RefineCommit(session=sid))
+    reply_of(server, P.RemoveLobe(session=sid, lobe=0))
+    edited = reply_of(server, P.RefineCommit(session=sid))
     assert not set(first.ids) & set(edited.ids) and len(library_ids(server)) == 6
-    ok(server, P.RefineUndo(session=sid))
-    undone = ok(server, P.RefineCommit(session=sid))  # HEAD: stored the first tree again (9 examples)
+    reply_of(server, P.RefineUndo(session=sid))
+    undone = reply_of(server, P.RefineCommit(session=sid))  # HEAD: stored the first tree again (9 examples)
     assert undone.ids == first.ids and repeat_note(undone)
-    ok(server, P.RefineRedo(session=sid))
-    redone = ok(server, P.RefineCommit(session=sid))
+    reply_of(server, P.RefineRedo(session=sid))
+    redone = reply_of(server, P.RefineCommit(session=sid))
     assert redone.ids == edited.ids and repeat_note(redone)
     assert len(library_ids(server)) == 6
     assert undone.notes[-1] == (f"this draft {P.ALREADY_COMMITTED}, unchanged since, as "
@@ -64,33 +52,33 @@ def test_undo_and_redo_back_to_committed_trees_store_nothing(server):
 
 def test_a_commit_after_a_restart_stores_nothing(folders):
     with dispatcher(*folders) as server:
-        sid = open_draft(server)
-        first = ok(server, P.RefineCommit(session=sid)).ids
+        sid = open_toy_draft(server)
+        first = reply_of(server, P.RefineCommit(session=sid)).ids
     with dispatcher(*folders) as server:  # a new server: the draft is rebuilt from its saved scan
-        again = ok(server, P.RefineCommit(session=sid))
+        again = reply_of(server, P.RefineCommit(session=sid))
         assert again.ids == first and repeat_note(again)  # HEAD: 3 more examples
         assert library_ids(server) == sorted(first)
 
 
 def test_the_same_scan_in_another_session_is_the_same_tree(server):
-    first = ok(server, P.RefineCommit(session=open_draft(server))).ids
-    again = ok(server, P.RefineCommit(session=open_draft(server)))
+    first = reply_of(server, P.RefineCommit(session=open_toy_draft(server))).ids
+    again = reply_of(server, P.RefineCommit(session=open_toy_draft(server)))
     assert again.ids == first and repeat_note(again) and len(library_ids(server)) == 3
 
 
 def test_another_name_or_other_points_is_another_tree(server):
-    first = ok(server, P.RefineCommit(session=open_draft(server))).ids
-    renamed = ok(server, P.RefineCommit(session=open_draft(server, name="toy2")))
-    moved = ok(server, P.RefineCommit(session=open_draft(server, shift=(0.0, 0.0, 0.001))))
+    first = reply_of(server, P.RefineCommit(session=open_toy_draft(server))).ids
+    renamed = reply_of(server, P.RefineCommit(session=open_toy_draft(server, name="toy2")))
+    moved = reply_of(server, P.RefineCommit(session=open_toy_draft(server, shift=(0.0, 0.0, 0.001))))
     assert not repeat_note(renamed) and not repeat_note(moved)
     assert len({*first, *renamed.ids, *moved.ids}) == 9 and len(library_ids(server)) == 9
 
 
 def test_a_partly_stored_tree_is_stored_whole_with_a_note(server):
-    sid = open_draft(server)
-    first = ok(server, P.RefineCommit(session=sid)).ids
-    ok(server, P.LibraryDelete(id=first[0]))
-    again = ok(server, P.RefineCommit(session=sid))
+    sid = open_toy_draft(server)
+    first = reply_of(server, P.RefineCommit(session=sid)).ids
+    reply_of(server, P.LibraryDelete(id=first[0]))
+    again = reply_of(server, P.RefineCommit(session=sid))
     assert not set(again.ids) & set(first) and len(library_ids(server)) == 5
     assert not repeat_note(again)
     assert (f"2 of 3 examples are the same as {first[1]}, {first[2]} in the library; "
@@ -113,8 +101,8 @@ def test_the_content_hash_holds_no_id():
 # -- 2. refine.points in float64 --------------------------------------------------------------------------
 def test_refine_points_keep_utm_coordinates_exactly(server):
     utm = (500_000.0, 5_400_000.0, 300.0)
-    sid = open_draft(server, options={**OPTIONS, "height": None}, shift=utm)
-    cloud = ok(server, P.RefinePoints(session=sid))
+    sid = open_toy_draft(server, options={**TOY_DRAFT_OPTIONS, "height": None}, shift=utm)
+    cloud = reply_of(server, P.RefinePoints(session=sid))
     assert cloud.points.dtype == np.float64
     rid, parsed = P.parse(P.to_frames(cloud, 9))  # what the client decodes
     assert rid == 9 and parsed.points.dtype == np.float64
@@ -125,11 +113,11 @@ def test_refine_points_keep_utm_coordinates_exactly(server):
 
 def test_refine_points_are_the_drafts_points(server):
     utm = (500_000.0, 5_400_000.0, 300.0)
-    pts, labels = toy()
-    sid = ok(server, P.SessionNew()).session
-    state = ok(server, P.RefineOpen(session=sid, points=pts + utm, labels=labels, name="utm",
-                                    options={**OPTIONS, "height": None}))
-    got = P.parse(P.to_frames(ok(server, P.RefinePoints(session=sid)), 1))[1].points
+    pts, labels = toy_cloud()
+    sid = reply_of(server, P.SessionNew()).session
+    state = reply_of(server, P.RefineOpen(session=sid, points=pts + utm, labels=labels, name="utm",
+                                    options={**TOY_DRAFT_OPTIONS, "height": None}))
+    got = P.parse(P.to_frames(reply_of(server, P.RefinePoints(session=sid)), 1))[1].points
     assert np.abs(got - state.hbl.points).max() == 0.0  # HEAD (float32): 0.25 m
 
 
@@ -154,9 +142,9 @@ def asprs(pts: np.ndarray) -> np.ndarray:
 
 @pytest.mark.parametrize("kind", ["refine.open", "library.import"])
 def test_labels_other_than_wood_and_leaf_are_refused_before_any_work(server, kind):
-    pts, _ = toy()
+    pts, _ = toy_cloud()
     if kind == "refine.open":
-        req = P.RefineOpen(session=ok(server, P.SessionNew()).session, points=pts, labels=asprs(pts))
+        req = P.RefineOpen(session=reply_of(server, P.SessionNew()).session, points=pts, labels=asprs(pts))
     else:
         req = P.LibraryImport(points=pts, labels=asprs(pts))
     reply = server.handle(req)  # not a Job: refused before any decomposition
@@ -166,27 +154,27 @@ def test_labels_other_than_wood_and_leaf_are_refused_before_any_work(server, kin
 
 
 def test_many_bad_labels_are_shown_five_at_most(server):
-    pts, _ = toy()
+    pts, _ = toy_cloud()
     labels = (np.arange(len(pts)) % 9).astype(np.uint8)
     reply = server.handle(P.LibraryImport(points=pts, labels=labels))
     assert reply.message == "library.import.labels: labels must be 0 (wood) or 1 (leaf); found 2, 3, 4, 5, 6, ..."
 
 
 def test_wood_and_leaf_labels_still_open(server):
-    pts, labels = toy()
+    pts, labels = toy_cloud()
     assert set(np.unique(labels)) == {0, 1}
-    sid = ok(server, P.SessionNew()).session
-    for req in (P.RefineOpen(session=sid, points=pts, labels=labels, options=OPTIONS),
-                P.LibraryImport(points=pts, labels=labels, options=OPTIONS)):
+    sid = reply_of(server, P.SessionNew()).session
+    for req in (P.RefineOpen(session=sid, points=pts, labels=labels, options=TOY_DRAFT_OPTIONS),
+                P.LibraryImport(points=pts, labels=labels, options=TOY_DRAFT_OPTIONS)):
         assert type(server.handle(req)).__name__ == "Job"  # accepted: the decomposition would run
 
 
 # -- 4. library.import names examples without lobes, as refine.commit and decompose do ----------------
 def test_an_import_names_its_bare_examples(server):
-    pts, labels = toy()
-    done = ok(server, P.LibraryImport(points=pts, labels=labels, name="toy",
+    pts, labels = toy_cloud()
+    done = reply_of(server, P.LibraryImport(points=pts, labels=labels, name="toy",
                                       options={"n_main": 12, "n_lobes": 3, "points": 4000}))
-    bare = [i for i in done.ids if ok(server, P.LibraryGet(id=i)).example.structure.lobes == ()]
+    bare = [i for i in done.ids if reply_of(server, P.LibraryGet(id=i)).example.structure.lobes == ()]
     assert 9 <= len(bare) < len(done.ids) == 12
     shown = ", ".join(bare[:4]) + (", ..." if len(bare) > 4 else "")
     assert done.notes[-1] == f"{len(bare)} of 12 examples have no lobes ({shown}): they grow no twigs or leaves"
@@ -196,7 +184,7 @@ def test_a_commit_of_no_examples_answers_no_ids(server, monkeypatch):
     """helper-99: with no example made, the look-up's result was never bound (an internal error)."""
     import arboretum_server.decompose.examples as examples
 
-    sid = open_draft(server)
+    sid = open_toy_draft(server)
     monkeypatch.setattr(examples, "make_examples", lambda hbl, prov, new_id=None: [])
-    done = ok(server, P.RefineCommit(session=sid))
+    done = reply_of(server, P.RefineCommit(session=sid))
     assert done.ids == () and library_ids(server) == []
