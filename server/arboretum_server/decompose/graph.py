@@ -38,9 +38,11 @@ class Graph:
     bridges: int
     """Edges added to join them."""
     neighbours: np.ndarray
-    """(N, k) int64: each point's nearest neighbours (itself excluded), for local features."""
+    """(N, k) int32: each point's nearest neighbours (itself excluded), for local features."""
     component: np.ndarray | None = None
     """(N,) int: each point's connected component before bridging (None: one component)."""
+    tree: cKDTree | None = None
+    """The KD-tree of the points the graph was built on (the pipeline's queries reuse it)."""
 
 
 def _edges(a: np.ndarray, b: np.ndarray, w: np.ndarray, n: int) -> csr_matrix:
@@ -49,22 +51,39 @@ def _edges(a: np.ndarray, b: np.ndarray, w: np.ndarray, n: int) -> csr_matrix:
     return m
 
 
+QUERY_CHUNK = 1 << 16
+"""``knn_graph`` asks the KD-tree for this many points' neighbours at a time, keeping the indices as int32:
+the whole (N, K + 1) int64 answer of one query is never held (136 MB on a million points)."""
+
+
+def _neighbours(tree: cKDTree, points: np.ndarray, kq: int) -> tuple[np.ndarray, np.ndarray]:
+    """(distances (N, kq - 1) float64, indices (N, kq - 1) int32) of each point's ``kq`` nearest, the first
+    column (the point itself) dropped; asked ``QUERY_CHUNK`` points at a time (each point's answer is its
+    own, so the same as one query)."""
+    n = len(points)
+    dist, nb = np.zeros((n, kq - 1)), np.zeros((n, kq - 1), np.int32)
+    for s in range(0, n, QUERY_CHUNK):
+        d, j = tree.query(points[s : s + QUERY_CHUNK], k=kq)
+        dist[s : s + QUERY_CHUNK] = d.reshape(len(d), -1)[:, 1:]
+        nb[s : s + QUERY_CHUNK] = j.reshape(len(j), -1)[:, 1:]
+    return dist, nb
+
+
 def knn_graph(points: np.ndarray, k: int, radius: float) -> Graph:
     """Graph of ``points`` (N, 3): each point to its ``k`` nearest within ``radius``, then bridged."""
     n = len(points)
     tree = cKDTree(points)
     kq = min(n, max(k, CANDIDATES) + 1)
-    dist, nb = tree.query(points, k=kq)
-    rows = np.repeat(np.arange(n), k)
-    d, c = dist[:, 1 : k + 1].ravel(), nb[:, 1 : k + 1].ravel()
-    ok = d <= radius
-    adj = _edges(rows[ok], c[ok], np.maximum(d[ok], 1e-12), n)
+    dist, nb = _neighbours(tree, points, kq)
+    rows, col = np.nonzero(dist[:, :k] <= radius)
+    adj = _edges(rows.astype(np.int32), nb[rows, col], np.maximum(dist[rows, col], 1e-12), n)
+    del rows, col
     ncomp, lab = connected_components(adj, directed=False)
     if ncomp == 1:
-        return Graph(adj, 1, 0, nb[:, 1:])
-    a, b, w = _bridges(points, tree, lab, ncomp, dist[:, 1:], nb[:, 1:])
+        return Graph(adj, 1, 0, nb, tree=tree)
+    a, b, w = _bridges(points, tree, lab, ncomp, dist, nb)
     adj = (adj + _edges(a, b, np.maximum(w, 1e-12), n)).tocsr()
-    return Graph(adj, ncomp, len(a), nb[:, 1:], lab)
+    return Graph(adj, ncomp, len(a), nb, lab, tree)
 
 
 def gap_graph(points: np.ndarray, g: Graph, radius: float) -> csr_matrix | None:
@@ -133,15 +152,19 @@ def _near_pairs(points: np.ndarray, groups: list[np.ndarray], reach: float) -> l
     return []
 
 
+def _cross(lab: np.ndarray, dist: np.ndarray, nb: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Candidate edges (a, b, w) from the neighbour lists ``nb`` (N, k) (lengths ``dist``) whose two ends
+    carry different labels ``lab``, in row-major order; one (N, k) bool mask, no (N k,) index copies."""
+    i, j = np.nonzero(lab[nb] != lab[:, None])
+    return i, nb[i, j].astype(np.int64), dist[i, j]
+
+
 def _bridges(points, tree, lab, ncomp, dist, nb):
     """Shortest edges (a, b, w) that join ``ncomp`` components labelled ``lab`` into one."""
     a_all, b_all, w_all = [], [], []
     while True:
         # candidate inter-component edges from the neighbour lists
-        src = np.repeat(np.arange(len(points)), nb.shape[1])
-        dst, w = nb.ravel(), dist.ravel()
-        cross = lab[src] != lab[dst]
-        ca, cb, cw = src[cross], dst[cross], w[cross]
+        ca, cb, cw = _cross(lab, dist, nb)
         ca, cb, cw = _isolated_edges(points, tree, lab, ncomp, ca, cb, cw)
         # minimum spanning tree over components using the shortest edge per component pair
         la, lb = lab[ca], lab[cb]
@@ -209,7 +232,11 @@ def _nearest_pair(points, tree, inside, lab, c):
     reach = float(np.linalg.norm(hi - lo)) / 2 + bound
     pad = 1e-9 * max(reach, float(np.abs(own).max()))
     near = np.asarray(tree.query_ball_point((lo + hi) / 2, reach + pad), np.int64)
-    near = np.union1d(near[lab[near] != c], [witness])
+    near = near[lab[near] != c]
+    # only an outsider within the bound of the component's box can lie nearer than the bound: the others
+    # are never the answer, so the KD-tree of the component is asked about fewer points
+    gap = np.maximum(np.maximum(lo - points[near], points[near] - hi), 0.0)
+    near = np.union1d(near[np.sqrt((gap * gap).sum(axis=1)) <= bound + pad], [witness])
     d, k = cKDTree(own).query(points[near])
     r = int(np.argmin(d))
     return inside[k[r : r + 1]], near[r : r + 1], d[r : r + 1]

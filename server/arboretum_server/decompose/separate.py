@@ -20,21 +20,27 @@ import numpy as np
 
 from arboretum_library.model import LEAF, WOOD
 
-from .grid import BoxGrid
+from .grid import box_counts
 
 CELL = 0.008
 """Small cell (0.8 m frame); the large one is three times bigger."""
+CHUNK = 1 << 16
+"""``local_dimension`` averages this many points' neighbourhoods at a time (a (CHUNK, k + 1) gather
+instead of an (N, k + 1) one and its index copy: 272 MB on a million points)."""
 LEAF_DIMENSION = 2.1
 """Default threshold: smoothed local dimension above this is foliage."""
 
 
 def local_dimension(points: np.ndarray, neighbours: np.ndarray) -> np.ndarray:
     """Smoothed local dimension (N,) of ``points`` (N, 3), averaged over ``neighbours`` (N, k) indices."""
-    n1, _ = BoxGrid(points, CELL).query(points)
-    n2, _ = BoxGrid(points, 3 * CELL).query(points)
+    n1 = box_counts(points, CELL)
+    n2 = box_counts(points, 3 * CELL)
     d = np.log(n2 / np.maximum(n1, 1)) / np.log(3.0)
-    nb = np.concatenate([np.arange(len(points))[:, None], neighbours], axis=1)
-    return d[nb].mean(axis=1)
+    out = np.zeros(len(points))
+    for s in range(0, len(points), CHUNK):
+        own = np.arange(s, min(s + CHUNK, len(points)))
+        out[own] = d[np.concatenate([own[:, None], neighbours[own]], axis=1)].mean(axis=1)
+    return out
 
 
 def separate(points: np.ndarray, neighbours: np.ndarray, threshold: float = LEAF_DIMENSION) -> np.ndarray:
