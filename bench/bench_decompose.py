@@ -36,6 +36,7 @@ def _decompose_rows() -> list[Row]:
     t = median_time(lambda: decompose(pts200, DecomposeOptions()), runs=3)
     rows.append(Row("decompose 200k points end to end (toy tree)", t, target=3.0, runs=3))
     rows.append(_full_resolution_row())
+    rows.append(_million_row())
     scan = [p for p in sample_scans() if p.name.startswith("07_")]
     if scan:
         pts = np.loadtxt(scan[0])
@@ -66,6 +67,26 @@ def _full_resolution_row() -> Row:
         graph._nearest_pair, lobes.DENSE = saved
     return Row("decompose 100k points at full resolution (--points 0)", fast, runs=3,
                baseline="bridging and lobes as before session 10", ratio=fast / base)
+
+
+def _million_row() -> Row:
+    """``decompose --points 0`` on a million points of the toy tree (a full terrestrial scan's size): one run,
+    about 20 s (session 14; 34-41 s and 1.4 GB before), with each step's time."""
+    from dataclasses import replace
+
+    from arboretum_server.decompose.options import DecomposeOptions
+    from arboretum_server.decompose.pipeline import decompose
+    from arboretum_server.decompose.toytree import toy_scan, toy_truth
+
+    pts, _ = toy_scan(toy_truth(), n=1_000_000, seed=2)
+    last = {}
+
+    def run():
+        last["d"] = decompose(pts, replace(DecomposeOptions(), points=0))
+
+    t = median_time(run, runs=1, warmup=0)
+    steps = {k: round(v, 2) for k, v in last["d"].timing.items()}
+    return Row("decompose 1M points at full resolution (--points 0, toy tree)", t, runs=1, extra={"s": steps})
 
 
 def _refine_rows() -> list[Row]:
