@@ -7,6 +7,7 @@ Examples come back with placeholder ids; the client gives them library ids when 
 
 from __future__ import annotations
 
+import gc
 import os
 import time
 from dataclasses import dataclass, field, replace
@@ -56,6 +57,26 @@ def dask_setup(worker: Any) -> None:
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     logging.getLogger("distributed.worker.state_machine").setLevel(logging.ERROR)
+    _GC["freeze"] = True
+
+
+_GC = {"freeze": False, "frozen": False}
+"""``freeze``: set in LocalCluster workers (``dask_setup``), where ``decompose_scan`` freezes the garbage
+collector's view of the heap after the worker's first task (``_freeze_once``); ``frozen``: done."""
+
+
+def _freeze_once() -> None:
+    """Move every object alive after the worker's first task (the imports of decompose, scipy, sklearn,
+    numba, distributed: ~200,000 objects) out of the garbage collector's reach (``gc.freeze``), once.
+    The worker process then exits in 0.04 s instead of 0.3-0.5 s (Python's collections at exit walked
+    them all), and closing the cluster, which the build waits for, took 0.1 s instead of 0.7-1.6 s
+    (docs/batch.md). The first task's cyclic garbage is collected first; frozen objects are still freed
+    when their last reference goes. Only in LocalCluster workers: a library function leaves another
+    process's collector alone."""
+    if _GC["freeze"] and not _GC["frozen"]:
+        _GC["frozen"] = True
+        gc.collect()
+        gc.freeze()
 
 
 @dataclass(frozen=True)
@@ -88,9 +109,12 @@ def decompose_scan(path: str, sha256: str, options: dict[str, Any]) -> ScanOutco
     try:
         from threadpoolctl import threadpool_limits
     except ImportError:  # scikit-learn brings threadpoolctl; without it rely on THREAD_ENV
-        return _run(path, sha256, options, t0)
-    with threadpool_limits(limits=1):
-        return _run(path, sha256, options, t0)
+        out = _run(path, sha256, options, t0)
+    else:
+        with threadpool_limits(limits=1):
+            out = _run(path, sha256, options, t0)
+    _freeze_once()
+    return out
 
 
 def _run(path: str, sha256: str, options: dict[str, Any], t0: float) -> ScanOutcome:
