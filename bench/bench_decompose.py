@@ -104,7 +104,28 @@ def _refine_rows() -> list[Row]:
         "merge lobes": lambda: refine.merge_lobes(d, [1, 2]),
         "split lobe (2 strokes)": lambda: refine.split_lobe(d, 4, [lobe[:2], lobe[-2:]]),
     }
-    return [Row(f"refine: {name}", median_time(fn, runs=7), target=0.1, runs=7) for name, fn in ops.items()]
+    rows = [Row(f"refine: {name}", median_time(fn, runs=7), target=0.1, runs=7) for name, fn in ops.items()]
+    return rows + [_slowest_refine_row()]
+
+
+def _slowest_refine_row() -> Row:
+    """The slowest of a fixed set of refinements: merges of lobes eight apart (j, j + 8 for even j) on the
+    leaf-on pine, seed 1, the tree of the sweeps' slow tail (a merged lobe swallows kept branches that
+    are routed again, with the bent repair and carvings round the trunk)."""
+    from arboretum_server.decompose import refine
+    from arboretum_server.decompose.options import DecomposeOptions
+    from arboretum_server.decompose.pipeline import decompose
+    from arboretum_server.decompose.report import CASES, grow_truth
+    from arboretum_server.decompose.toytree import toy_scan
+
+    truth = grow_truth("harmonic", "pine", 1)
+    pts, _ = toy_scan(truth, n=40000, noise=0.002 * float(np.ptp(truth.positions[:, 2])), seed=1, **CASES["leaf-on"])
+    d = decompose(pts, DecomposeOptions(species="pine"))
+    n = len(d.lobes)
+    times = {j: median_time(lambda j=j: refine.merge_lobes(d, [j, (j + 8) % n]), runs=3) for j in range(0, n, 2)}
+    worst = max(times, key=times.get)
+    return Row(f"refine: slowest of {len(times)} merges (j, j + 8), leaf-on pine", times[worst], target=0.1, runs=3,
+               note=f"lobes {worst} and {(worst + 8) % n}", extra={"median_ms": round(1000 * float(np.median(list(times.values()))), 1)})
 
 
 def _kernel_rows() -> list[Row]:

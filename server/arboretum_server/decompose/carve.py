@@ -9,6 +9,7 @@ which reuses each lobe's plain tetrahedralisation (``remember_plain``) while its
 
 from __future__ import annotations
 
+import hashlib
 import weakref
 from dataclasses import replace
 
@@ -78,15 +79,49 @@ def _recall_plain(members: np.ndarray, points: np.ndarray) -> Tetrahedra | None:
     return hit[1] if ok else None
 
 
+_CARVED: dict[int, tuple[weakref.ref, np.ndarray, dict]] = {}
+"""Carved shapes of each lobe by the id of its ``members`` array while that lives (with the points array
+they index): by (blockers' bytes, radius, steps). ``unwrap`` carves the same lobes with the same wood each
+time a branch is routed again, and a carving it undoes is asked for again by the next branch."""
+CARVED_KEPT = 16
+"""Carved shapes remembered per lobe (the oldest go first)."""
+WORK = {"carvings": 0}
+"""Carved shapes computed (not recalled) since the count was last reset (the tests read it)."""
+
+
+def _carved(members: np.ndarray, pts: np.ndarray) -> dict:
+    """The carved shapes remembered for ``members`` indexing ``pts`` (a new, empty store if none): the
+    lobe's points, its ``steps`` and ``alpha`` and the blockers decide the shape."""
+    key = id(members)
+    hit = _CARVED.get(key)
+    if hit is not None and hit[0]() is members and hit[1] is pts:
+        return hit[2]
+
+    def forget(ref: weakref.ref, key: int = key) -> None:
+        if _CARVED.get(key, (None,))[0] is ref:
+            del _CARVED[key]
+
+    _CARVED[key] = (weakref.ref(members, forget), pts, {})
+    return _CARVED[key][2]
+
+
 def carve_lobe(lobes: list[LobeState], k: int, pts: np.ndarray, blockers: np.ndarray, radius: float) -> bool:
     """Rebuild lobe ``k``'s hull with the ``blockers`` (B, 3) within one probe radius of its points kept
-    out, at most at its plain probe radius (in place); False when the carved shape is not usable."""
+    out, at most at its plain probe radius (in place); False when the carved shape is not usable. The
+    shape depends on the lobe's points, steps and the blockers only, so it is remembered (``_CARVED``)."""
     lb = lobes[k]
     members = pts[lb.members]
     lo, hi = members.min(axis=0) - radius, members.max(axis=0) + radius
-    near = blockers[((blockers > lo) & (blockers < hi)).all(axis=1)]
-    steps = lb.steps if lb.steps is not None else plain_steps(members, radius) if lb.alpha else RADIUS_STEPS
-    shape = carved_hull(members, radius, near, steps, _recall_plain(lb.members, members))
+    near = np.ascontiguousarray(blockers[((blockers > lo) & (blockers < hi)).all(axis=1)], dtype=np.float64)
+    store = _carved(lb.members, pts)
+    key = (hashlib.sha1(near.tobytes()).digest(), len(near), float(radius), lb.steps, lb.alpha)
+    if key not in store:
+        WORK["carvings"] += 1
+        steps = lb.steps if lb.steps is not None else plain_steps(members, radius) if lb.alpha else RADIUS_STEPS
+        store[key] = carved_hull(members, radius, near, steps, _recall_plain(lb.members, members))
+        if len(store) > CARVED_KEPT:
+            del store[next(iter(store))]
+    shape = store[key]
     if shape is None:
         return False
     lobes[k] = replace(lb, hull_vertices=shape[0], hull_faces=shape[1], alpha=True)

@@ -6,35 +6,91 @@ replace a routed branch which still enters a foreign lobe (VRTree has neither; o
 - ``bent_fallback``: a two-piece branch, main vertex -> one of the lobe's own points -> lobe centre
   (every (n // ``waypoints``)-th of its n points, 32-63 of them, whose segment to the centre is
   clear).
+
+Both ask hundreds of times per refinement whether points or segments enter a foreign lobe. The hulls
+are packed once per set of hulls (``_packed``) and tested in one compiled loop (``lobes.inside_any``,
+``lobes.segments_blocked``): a point stops at the first lobe holding it, a segment at its first sample
+inside one (session 14: the same answers as testing every sample lobe by lobe, a tenth of the tests).
 """
 
 from __future__ import annotations
 
+import threading
+import weakref
+from collections import OrderedDict
+from operator import attrgetter
+
 import numpy as np
 
-from .lobes import inside
+from .lobes import HullPack, inside_any, join_packs, pack_hull, segments_blocked
 from .merge import BranchSet, resample_step
 from .state import LobeState
+
+WORK = {"hull_tests": 0}
+"""(point, lobe) inside tests made by ``inside_foreign`` and the repairs since the count was last reset:
+a measure of their work that does not depend on the machine (the tests read it)."""
+
+_PACKS: OrderedDict[tuple[int, ...], tuple[list[np.ndarray], HullPack, tuple[np.ndarray, np.ndarray]]] = OrderedDict()
+"""The ``HullPack`` and boxes of the last ``PACKS_KEPT`` sets of hulls, by the ids of their arrays (which the
+entry holds, so the ids stay theirs): a refinement asks about the same lobes hundreds of times between two
+hull changes."""
+PACKS_KEPT = 8
+_PACKS_LOCK = threading.Lock()
+_VERTICES, _FACES = attrgetter("hull_vertices"), attrgetter("hull_faces")
+_HULLS: dict[int, tuple[weakref.ref, np.ndarray, HullPack, np.ndarray, np.ndarray]] = {}
+"""Each hull's own ``HullPack`` and box (lo (3,), hi (3,)), by the id of its vertex array while that lives."""
+
+
+def _hull(lb: LobeState) -> tuple[HullPack, np.ndarray, np.ndarray]:
+    """Lobe ``lb``'s hull as a ``HullPack`` with its box, built once per hull."""
+    verts, faces = lb.hull_vertices, lb.hull_faces
+    hit = _HULLS.get(id(verts))
+    if hit is not None and hit[0]() is verts and hit[1] is faces:
+        return hit[2], hit[3], hit[4]
+    key = id(verts)
+
+    def forget(ref: weakref.ref, key: int = key) -> None:
+        if _HULLS.get(key, (None,))[0] is ref:
+            del _HULLS[key]
+
+    out = (pack_hull(verts, faces), verts.min(axis=0), verts.max(axis=0))
+    _HULLS[key] = (weakref.ref(verts, forget), faces, *out)
+    return out
+
+
+def _packed(lobes: list[LobeState]) -> tuple[HullPack, tuple[np.ndarray, np.ndarray]]:
+    """The ``HullPack`` of the lobes' hulls and their boxes (lo (L, 3), hi (L, 3)), built once per set of hulls."""
+    key = (*map(id, map(_VERTICES, lobes)), *map(id, map(_FACES, lobes)))
+    with _PACKS_LOCK:
+        hit = _PACKS.get(key)
+        if hit is not None:
+            _PACKS.move_to_end(key)
+            return hit[1], hit[2]
+    parts = [_hull(lb) for lb in lobes]
+    pack = join_packs([p[0] for p in parts])
+    box = (np.array([p[1] for p in parts]).reshape(-1, 3), np.array([p[2] for p in parts]).reshape(-1, 3))
+    for a in box:
+        a.flags.writeable = False  # shared by every caller until the hulls change
+    with _PACKS_LOCK:
+        _PACKS[key] = ([*map(_VERTICES, lobes), *map(_FACES, lobes)], pack, box)
+        while len(_PACKS) > PACKS_KEPT:
+            _PACKS.popitem(last=False)
+    return pack, box
 
 
 def boxes(lobes: list[LobeState]) -> tuple[np.ndarray, np.ndarray]:
     """Bounding boxes (lo (L, 3), hi (L, 3)) of the lobes' hulls."""
-    return (np.array([lb.hull_vertices.min(axis=0) for lb in lobes]),
-            np.array([lb.hull_vertices.max(axis=0) for lb in lobes]))
+    return _packed(lobes)[1]
 
 
 def inside_foreign(lobes: list[LobeState], j: int, q: np.ndarray,
                    box: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
-    """(M,) bool: which of the points ``q`` (M, 3) lie inside a lobe other than ``j``."""
-    lo, hi = box if box is not None else boxes(lobes)
-    inbox = ((q[None] > lo[:, None]) & (q[None] < hi[:, None])).all(axis=2)  # (L, M)
-    inbox[j] = False
-    out = np.zeros(len(q), bool)
-    for k in np.flatnonzero(inbox.any(axis=1)):
-        sel = np.flatnonzero(inbox[k] & ~out)
-        if len(sel):
-            lb = lobes[k]
-            out[sel] = inside(lb.hull_vertices, lb.hull_faces, q[sel])
+    """(M,) bool: which of the points ``q`` (M, 3) lie inside a lobe other than ``j`` (a lobe is tested
+    only for points inside ``box``, its bounding box by default; ``lobes.inside_any``)."""
+    pack, own = _packed(lobes)
+    lo, hi = box if box is not None else own
+    out, tests = inside_any(pack, lo, hi, j, q)
+    WORK["hull_tests"] += tests
     return out
 
 
@@ -61,8 +117,7 @@ def straight_fallback(lobes: list[LobeState], j: int, mains: BranchSet, tries: i
     box = boxes(lobes)
     for start in range(0, len(order), batch):
         cand = order[start : start + batch]
-        q, which = _segment_samples(verts[cand], np.broadcast_to(centre, (len(cand), 3)), step)
-        bad = _blocked(lobes, j, q, which, len(cand), box)
+        bad = _blocked(lobes, j, verts[cand], np.broadcast_to(centre, (len(cand), 3)), step, box)
         if not bad.all():
             i = int(cand[int(np.argmin(bad))])
             m = max(2, int(np.ceil(dist[i] / 0.01)) + 1)
@@ -71,20 +126,26 @@ def straight_fallback(lobes: list[LobeState], j: int, mains: BranchSet, tries: i
     return None
 
 
-def _blocked(lobes: list[LobeState], j: int, q: np.ndarray, which: np.ndarray, n: int,
-             box: tuple[np.ndarray, np.ndarray], stride: int = 4) -> np.ndarray:
-    """(n,) bool: segments (samples ``q`` (M, 3) of segment ``which`` (M,)) with a sample inside a lobe
-    other than ``j``. Every ``stride``-th sample first: most blocked segments show it there, and only
-    the segments still clear are tested at every sample (the same answer, a fraction of the cost)."""
-    coarse = np.arange(len(q)) % stride == 0
-    bad = np.bincount(which[coarse], weights=inside_foreign(lobes, j, q[coarse], box), minlength=n) > 0
-    rest = ~coarse & ~bad[which]
-    return bad | (np.bincount(which[rest], weights=inside_foreign(lobes, j, q[rest], box), minlength=n) > 0)
+def _blocked(lobes: list[LobeState], j: int, a: np.ndarray, b: np.ndarray, step: float,
+             box: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """(S,) bool: segments a[i] -> b[i] ((S, 3) each), sampled every ~``step``, with a sample inside a lobe
+    other than ``j`` (``lobes.segments_blocked``: every 4th sample first, and a segment stops at its first
+    sample inside: most blocked segments show it early)."""
+    counts = _sample_counts(a, b, step)
+    bad, tests = segments_blocked(_packed(lobes)[0], box[0], box[1], j, a, b, counts)
+    WORK["hull_tests"] += tests
+    return bad
+
+
+def _sample_counts(a: np.ndarray, b: np.ndarray, step: float) -> np.ndarray:
+    """(S,) samples every ~``step`` along the segments a[i] -> b[i], both ends included (at least 2)."""
+    return np.maximum(2, np.ceil(np.linalg.norm(b - a, axis=1) / step).astype(int) + 1)
 
 
 def _segment_samples(a: np.ndarray, b: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
-    """Points every ~``step`` along the segments a[i] -> b[i] ((S, 3) each) and the segment of each."""
-    counts = np.maximum(2, np.ceil(np.linalg.norm(b - a, axis=1) / step).astype(int) + 1)
+    """Points every ~``step`` along the segments a[i] -> b[i] ((S, 3) each) and the segment of each (the
+    samples ``_blocked`` makes one by one, for tests)."""
+    counts = _sample_counts(a, b, step)
     which = np.repeat(np.arange(len(a)), counts)
     first = np.cumsum(counts) - counts
     i = np.arange(len(which)) - first[which]
@@ -104,8 +165,7 @@ def bent_fallback(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndar
     centre, box = lobes[j].centre, boxes(lobes)
     members = pts[lobes[j].members]
     w = members[:: max(1, len(members) // waypoints)]
-    q, which = _segment_samples(w, np.broadcast_to(centre, w.shape), step)
-    w = w[~_blocked(lobes, j, q, which, len(w), box)]
+    w = w[~_blocked(lobes, j, w, np.broadcast_to(centre, w.shape), step, box)]
     if not len(w):
         return None
     verts, owner = main_vertices(mains)
@@ -114,8 +174,7 @@ def bent_fallback(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndar
     for start in range(0, len(order), batch):
         v = np.repeat(order[start : start + batch], len(w))  # every (vertex, waypoint) pair of the batch
         ww = np.tile(w, (len(v) // len(w), 1))
-        q, which = _segment_samples(verts[v], ww, step)
-        bad = _blocked(lobes, j, q, which, len(v), box)
+        bad = _blocked(lobes, j, verts[v], ww, step, box)
         if bad.all():
             continue
         length = np.where(bad, np.inf, np.linalg.norm(ww - verts[v], axis=1) + np.linalg.norm(ww - centre, axis=1))

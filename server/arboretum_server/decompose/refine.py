@@ -200,14 +200,11 @@ def _entered(before: list[LobeState], after: list[LobeState], changed: list[int]
 
 
 def _crossing_new(lobes: list[LobeState], n_kept: int, tol: float) -> set[int]:
-    """Kept lobes (indices < ``n_kept``) whose secondary branch enters one of the lobes after them."""
-    new = lobes[n_kept:]
-    out = set()
-    for i, lb in enumerate(lobes[:n_kept]):
-        sub = [lb, *new]
-        if foreign(sub, 0, lb.segment, tol, boxes(sub)):
-            out.add(i)
-    return out
+    """Kept lobes (indices < ``n_kept``) whose secondary branch enters one of the lobes after them (the kept
+    lobes' boxes are emptied, so only the new lobes are tried)."""
+    lo, hi = (b.copy() for b in boxes(lobes))
+    lo[:n_kept], hi[:n_kept] = np.inf, -np.inf
+    return {i for i, lb in enumerate(lobes[:n_kept]) if foreign(lobes, i, lb.segment, tol, (lo, hi))}
 
 
 def remove_lobe(d: Decomposition, j: int) -> Decomposition:
