@@ -105,13 +105,15 @@ def _refine_rows() -> list[Row]:
         "split lobe (2 strokes)": lambda: refine.split_lobe(d, 4, [lobe[:2], lobe[-2:]]),
     }
     rows = [Row(f"refine: {name}", median_time(fn, runs=7), target=0.1, runs=7) for name, fn in ops.items()]
-    return rows + [_slowest_refine_row()]
+    return rows + _slowest_refine_rows()
 
 
-def _slowest_refine_row() -> Row:
-    """The slowest of a fixed set of refinements: merges of lobes eight apart (j, j + 8 for even j) on the
-    leaf-on pine, seed 1, the tree of the sweeps' slow tail (a merged lobe swallows kept branches that
-    are routed again, with the bent repair and carvings round the trunk)."""
+def _slowest_refine_rows() -> list[Row]:
+    """The slowest of two fixed sets of refinements on the leaf-on pine, seed 1, the tree of the sweeps'
+    slow tail: merges of lobes eight apart (j, j + 8 for even j: the merged lobe wraps the trunk and
+    swallows kept branches; it gives way to them, in several closed pieces if need be), and "around"
+    inserts (lobe j's points within 0.35 of its extent round its centre, even j: the selection takes
+    points from many lobes, each rebuilt and most routed again)."""
     from arboretum_server.decompose import refine
     from arboretum_server.decompose.options import DecomposeOptions
     from arboretum_server.decompose.pipeline import decompose
@@ -122,10 +124,23 @@ def _slowest_refine_row() -> Row:
     pts, _ = toy_scan(truth, n=40000, noise=0.002 * float(np.ptp(truth.positions[:, 2])), seed=1, **CASES["leaf-on"])
     d = decompose(pts, DecomposeOptions(species="pine"))
     n = len(d.lobes)
-    times = {j: median_time(lambda j=j: refine.merge_lobes(d, [j, (j + 8) % n]), runs=3) for j in range(0, n, 2)}
-    worst = max(times, key=times.get)
-    return Row(f"refine: slowest of {len(times)} merges (j, j + 8), leaf-on pine", times[worst], target=0.1, runs=3,
-               note=f"lobes {worst} and {(worst + 8) % n}", extra={"median_ms": round(1000 * float(np.median(list(times.values()))), 1)})
+    inlobe = np.flatnonzero(d.lobe_of >= 0)
+
+    def around(j: int) -> np.ndarray:
+        lb = d.lobes[j]
+        extent = float(np.linalg.norm(np.ptp(d.points[lb.members], axis=0)))
+        return inlobe[np.linalg.norm(d.points[inlobe] - lb.centre, axis=1) < 0.35 * extent]
+
+    sets = {"merges (j, j + 8)": {j: lambda j=j: refine.merge_lobes(d, [j, (j + 8) % n]) for j in range(0, n, 2)},
+            '"around" inserts': {j: lambda sel=around(j): refine.insert_lobe(d, sel) for j in range(0, n, 2)}}
+    rows = []
+    for name, ops in sets.items():
+        times = {j: median_time(fn, runs=3) for j, fn in ops.items()}
+        worst = max(times, key=times.get)
+        rows.append(Row(f"refine: slowest of {len(times)} {name}, leaf-on pine", times[worst], target=0.1, runs=3,
+                        note=f"lobe {worst}" + (f" and {(worst + 8) % n}" if "merge" in name else ""),
+                        extra={"median_ms": round(1000 * float(np.median(list(times.values()))), 1)}))
+    return rows
 
 
 def _kernel_rows() -> list[Row]:

@@ -1,5 +1,5 @@
 """The refinement repairs' fast paths (session 14): the inside tests of many lobes at once in one compiled
-loop over packed hulls (``lobes.inside_any``, ``lobes.segments_blocked``, ``clear._packed``) and carved
+loop over packed hulls (``hullpack.inside_any``, ``hullpack.segments_blocked``, ``clear._packed``) and carved
 shapes remembered per lobe (``carve._CARVED``) give the answers of the slow, plain code they replace, for
 a fraction of its work (counted, not timed)."""
 
@@ -133,9 +133,10 @@ def _run_counted(monkeypatch, fn, reference: bool) -> tuple[object, int, int]:
 
 
 def test_the_slowest_sweep_merge_gives_the_reference_result_for_a_fraction_of_the_work(leaf_on_pine, monkeypatch):
-    # helper-111's sweep: merging lobes 20 and 28 of the leaf-on pine (seed 1) swallows kept branches
-    # that no carving clears; 17 are routed again, mostly with the bent repair and carvings round the
-    # trunk (1.8 s before session 14's fast paths, 0.3 s after, on a shared 2-core machine).
+    # helper-111's sweep: merging lobes 20 and 28 of the leaf-on pine (seed 1) swallowed kept branches
+    # that no one-piece carving clears; 17 were routed again, mostly with the bent repair and carvings
+    # round the trunk (1.8 s before session 14's fast paths, 0.3 s after). Since helper-115 the merged
+    # lobe gives way in pieces and the work is small, but the packed tests must still match the reference.
     from arboretum_server.decompose.refine import merge_lobes
 
     d = leaf_on_pine
@@ -146,5 +147,5 @@ def test_the_slowest_sweep_merge_gives_the_reference_result_for_a_fraction_of_th
         assert np.array_equal(a.members, b.members) and np.array_equal(a.centre, b.centre)
         assert np.array_equal(a.hull_vertices, b.hull_vertices) and np.array_equal(a.hull_faces, b.hull_faces)
         assert np.array_equal(a.segment, b.segment) and (a.parent, a.parent_vertex) == (b.parent, b.parent_vertex)
-    assert ref_tests > 5 * fast_tests > 0  # 1,307,871 and 136,824 (point, lobe) tests
-    assert fast_carvings < ref_carvings  # 20 and 33: unwrap carves the same lobes with the same wood again
+    assert ref_tests > 4 * fast_tests > 0  # 16,172 and 3,269 (point, lobe) tests (1,307,871 and 136,824 before pieces)
+    assert fast_carvings <= ref_carvings  # 2 and 2 (20 and 33 before: unwrap carved the same lobes again)

@@ -105,20 +105,22 @@ def _carved(members: np.ndarray, pts: np.ndarray) -> dict:
     return _CARVED[key][2]
 
 
-def carve_lobe(lobes: list[LobeState], k: int, pts: np.ndarray, blockers: np.ndarray, radius: float) -> bool:
+def carve_lobe(lobes: list[LobeState], k: int, pts: np.ndarray, blockers: np.ndarray, radius: float,
+               pieces: bool = False) -> bool:
     """Rebuild lobe ``k``'s hull with the ``blockers`` (B, 3) within one probe radius of its points kept
-    out, at most at its plain probe radius (in place); False when the carved shape is not usable. The
-    shape depends on the lobe's points, steps and the blockers only, so it is remembered (``_CARVED``)."""
+    out, at most at its plain probe radius (in place); False when the carved shape is not usable (closed and
+    one piece; ``pieces``: or closed in several, ``lobes.carved_hull``). The shape depends on the lobe's
+    points, steps and the blockers only, so it is remembered (``_CARVED``)."""
     lb = lobes[k]
     members = pts[lb.members]
     lo, hi = members.min(axis=0) - radius, members.max(axis=0) + radius
     near = np.ascontiguousarray(blockers[((blockers > lo) & (blockers < hi)).all(axis=1)], dtype=np.float64)
     store = _carved(lb.members, pts)
-    key = (hashlib.sha1(near.tobytes()).digest(), len(near), float(radius), lb.steps, lb.alpha)
+    key = (hashlib.sha1(near.tobytes()).digest(), len(near), float(radius), lb.steps, lb.alpha, pieces)
     if key not in store:
         WORK["carvings"] += 1
         steps = lb.steps if lb.steps is not None else plain_steps(members, radius) if lb.alpha else RADIUS_STEPS
-        store[key] = carved_hull(members, radius, near, steps, _recall_plain(lb.members, members))
+        store[key] = carved_hull(members, radius, near, steps, _recall_plain(lb.members, members), pieces)
         if len(store) > CARVED_KEPT:
             del store[next(iter(store))]
     shape = store[key]

@@ -8,8 +8,8 @@ replace a routed branch which still enters a foreign lobe (VRTree has neither; o
   clear).
 
 Both ask hundreds of times per refinement whether points or segments enter a foreign lobe. The hulls
-are packed once per set of hulls (``_packed``) and tested in one compiled loop (``lobes.inside_any``,
-``lobes.segments_blocked``): a point stops at the first lobe holding it, a segment at its first sample
+are packed once per set of hulls (``_packed``) and tested in one compiled loop (``hullpack.inside_any``,
+``hullpack.segments_blocked``): a point stops at the first lobe holding it, a segment at its first sample
 inside one (session 14: the same answers as testing every sample lobe by lobe, a tenth of the tests).
 """
 
@@ -22,7 +22,7 @@ from operator import attrgetter
 
 import numpy as np
 
-from .lobes import HullPack, inside_any, join_packs, pack_hull, segments_blocked
+from .hullpack import HullPack, inside_any, join_packs, pack_hull, segments_blocked
 from .merge import BranchSet, resample_step
 from .state import LobeState
 
@@ -86,7 +86,7 @@ def boxes(lobes: list[LobeState]) -> tuple[np.ndarray, np.ndarray]:
 def inside_foreign(lobes: list[LobeState], j: int, q: np.ndarray,
                    box: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """(M,) bool: which of the points ``q`` (M, 3) lie inside a lobe other than ``j`` (a lobe is tested
-    only for points inside ``box``, its bounding box by default; ``lobes.inside_any``)."""
+    only for points inside ``box``, its bounding box by default; ``hullpack.inside_any``)."""
     pack, own = _packed(lobes)
     lo, hi = box if box is not None else own
     out, tests = inside_any(pack, lo, hi, j, q)
@@ -129,7 +129,7 @@ def straight_fallback(lobes: list[LobeState], j: int, mains: BranchSet, tries: i
 def _blocked(lobes: list[LobeState], j: int, a: np.ndarray, b: np.ndarray, step: float,
              box: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
     """(S,) bool: segments a[i] -> b[i] ((S, 3) each), sampled every ~``step``, with a sample inside a lobe
-    other than ``j`` (``lobes.segments_blocked``: every 4th sample first, and a segment stops at its first
+    other than ``j`` (``hullpack.segments_blocked``: every 4th sample first, and a segment stops at its first
     sample inside: most blocked segments show it early)."""
     counts = _sample_counts(a, b, step)
     bad, tests = segments_blocked(_packed(lobes)[0], box[0], box[1], j, a, b, counts)

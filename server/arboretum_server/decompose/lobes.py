@@ -14,7 +14,6 @@ also keeps out of given blocker points (main-branch wood a lobe wraps round, ``c
 from __future__ import annotations
 
 import copy
-from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -220,8 +219,9 @@ RADIUS_STEPS = (1.0, 1.5, 2.0, 3.0)
 """Multiples of the probe radius tried, in order, until the alpha shape is a closed 2-manifold."""
 
 
-def is_closed_manifold(faces: np.ndarray) -> bool:
-    """True when every edge of ``faces`` (F, 3) borders exactly two triangles and they form one piece."""
+def is_closed_manifold(faces: np.ndarray, one_piece: bool = True) -> bool:
+    """True when every edge of ``faces`` (F, 3) borders exactly two triangles and (``one_piece``) they form
+    one piece."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
@@ -231,6 +231,8 @@ def is_closed_manifold(faces: np.ndarray) -> bool:
     _, counts = np.unique(e[:, 0] * (int(faces.max()) + 1) + e[:, 1], return_counts=True)
     if (counts != 2).any():
         return False
+    if not one_piece:
+        return True
     n = int(faces.max()) + 1
     graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
     return connected_components(graph, directed=False)[0] == 1
@@ -259,21 +261,25 @@ def plain_hull(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarra
 
 
 def carved_hull(points: np.ndarray, radius: float, blockers: np.ndarray | None,
-                steps: tuple[float, ...] = RADIUS_STEPS,
-                tet: Tetrahedra | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+                steps: tuple[float, ...] = RADIUS_STEPS, tet: Tetrahedra | None = None,
+                pieces: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
     """(vertices (V, 3), outward faces (F, 3) int32): the first closed, one-piece alpha shape of
     ``points`` (N, 3) over the probe radii ``radius * steps`` that does not span ``blockers`` (B, 3) or
     None (see ``alpha_shape``); None if there is none. ``tet``: ``Tetrahedra(points)``, when known.
+    ``pieces``: when no radius gives one piece, the first closed shape in several pieces (a lobe merged
+    from clusters on either side of the trunk falls apart once the wood between them is carved out).
 
     At one radius the carved shape lies inside the plain one: adding points to a Delaunay
     tetrahedralisation only removes tetrahedra among the old points, and carving only drops more.
     """
     tet = (tet if tet is not None else Tetrahedra(points, radius / THIN)).without(blockers)
+    shapes = []
     for step in steps:
-        shape = tet.shape(radius * step)
-        if shape is not None and is_closed_manifold(shape[1]):
-            return shape
-    return None
+        shapes.append(tet.shape(radius * step))
+        if shapes[-1] is not None and is_closed_manifold(shapes[-1][1]):
+            return shapes[-1]
+    closed = [s for s in shapes if pieces and s is not None and is_closed_manifold(s[1], one_piece=False)]
+    return closed[0] if closed else None
 
 
 def plain_steps(points: np.ndarray, radius: float) -> tuple[float, ...]:
@@ -340,133 +346,3 @@ def _crossing_kernel(v: np.ndarray, f: np.ndarray, q: np.ndarray, out: np.ndarra
             if w != 0.0 and (w0 * v[a, 2] + w1 * v[b, 2] + w2 * v[c, 2]) / w > z:
                 total += s0
         out[i] = total
-
-
-class HullPack(NamedTuple):
-    """Several closed hulls in flat arrays for ``inside_any`` and ``segments_blocked``: every hull's faces
-    with their XY boxes and top, computed once per set of hulls instead of once per query."""
-
-    vertices: np.ndarray
-    """(V, 3) float64: every hull's vertices, hull after hull."""
-    faces: np.ndarray
-    """(F, 3) int64: every hull's faces, as indices into ``vertices`` (each hull's order kept)."""
-    first: np.ndarray
-    """(H + 1,) int64: hull h owns faces first[h]:first[h + 1]."""
-    face_lo: np.ndarray
-    """(F, 2) float64: each face's smallest x and y."""
-    face_hi: np.ndarray
-    """(F, 2) float64: each face's largest x and y."""
-    face_top: np.ndarray
-    """(F,) float64: each face's largest z."""
-
-
-def pack_hull(vertices: np.ndarray, faces: np.ndarray) -> HullPack:
-    """The ``HullPack`` of one hull (vertices (V, 3), faces (F, 3))."""
-    verts = np.array(vertices, dtype=np.float64).reshape(-1, 3)  # a copy: a cache keyed by the hull's arrays holds it
-    faces = np.array(faces, dtype=np.int64).reshape(-1, 3)
-    corner = verts[faces]  # (F, 3 corners, 3)
-    return HullPack(verts, faces, np.array([0, len(faces)], np.int64),
-                    np.ascontiguousarray(corner[:, :, :2].min(axis=1)),
-                    np.ascontiguousarray(corner[:, :, :2].max(axis=1)), np.ascontiguousarray(corner[:, :, 2].max(axis=1)))
-
-
-def join_packs(packs: list[HullPack]) -> HullPack:
-    """One ``HullPack`` of the hulls of ``packs`` (one hull each), in order."""
-    if not packs:
-        return pack_hull(np.zeros((0, 3)), np.zeros((0, 3), np.int64))
-    shift = np.cumsum([0] + [len(p.vertices) for p in packs[:-1]])
-    return HullPack(np.concatenate([p.vertices for p in packs]),
-                    np.concatenate([p.faces + s for p, s in zip(packs, shift)]),
-                    np.cumsum([0] + [len(p.faces) for p in packs]).astype(np.int64),
-                    np.concatenate([p.face_lo for p in packs]), np.concatenate([p.face_hi for p in packs]),
-                    np.concatenate([p.face_top for p in packs]))
-
-
-def inside_any(pack: HullPack, lo: np.ndarray, hi: np.ndarray, skip: int, q: np.ndarray) -> tuple[np.ndarray, int]:
-    """((M,) bool, hull tests): which ``q`` (M, 3) lie inside a hull of ``pack`` other than ``skip``, each
-    hull tried only for points strictly inside its box (``lo``, ``hi`` (H, 3)) and only until one holds the
-    point. The same answer as ``inside`` hull by hull; the count is of (point, hull) tests made."""
-    q = np.ascontiguousarray(q, dtype=np.float64).reshape(-1, 3)
-    out = np.zeros(len(q), np.bool_)
-    tests = _inside_any_kernel(pack.vertices, pack.faces, pack.first, pack.face_lo, pack.face_hi, pack.face_top,
-                               np.ascontiguousarray(lo, np.float64), np.ascontiguousarray(hi, np.float64),
-                               int(skip), q, out)
-    return out, int(tests)
-
-
-def segments_blocked(pack: HullPack, lo: np.ndarray, hi: np.ndarray, skip: int, start: np.ndarray, end: np.ndarray,
-                     counts: np.ndarray, stride: int = 4) -> tuple[np.ndarray, int]:
-    """((S,) bool, hull tests): which segments ``start`` -> ``end`` ((S, 3) each), sampled at ``counts``
-    (S,) evenly spaced points from end to end (``np.linspace``), have a sample inside a hull of ``pack``
-    other than ``skip`` (as ``inside_any``). Each segment's every ``stride``-th sample is tried first,
-    and a segment stops at its first sample inside a hull: the answer of testing every sample, for the
-    work of the samples up to that one (the samples are made here, only as far as they are needed)."""
-    out = np.zeros(len(start), np.bool_)
-    tests = _segments_kernel(pack.vertices, pack.faces, pack.first, pack.face_lo, pack.face_hi, pack.face_top,
-                             np.ascontiguousarray(lo, np.float64), np.ascontiguousarray(hi, np.float64), int(skip),
-                             np.ascontiguousarray(start, np.float64), np.ascontiguousarray(end, np.float64),
-                             np.ascontiguousarray(counts, np.int64), int(stride), out)
-    return out, int(tests)
-
-
-@njit(cache=True)
-def _crossings_of(v, f, t0, t1, flo, fhi, ftop, x, y, z) -> int:  # pragma: no cover - numba
-    """Signed crossings of the ray up from (x, y, z) through faces t0:t1 (``_crossing_kernel``'s sum)."""
-    total = 0
-    for t in range(t0, t1):
-        if x < flo[t, 0] or x > fhi[t, 0] or y < flo[t, 1] or y > fhi[t, 1] or z > ftop[t]:
-            continue
-        a, b, c = f[t, 0], f[t, 1], f[t, 2]
-        s0 = _side(v, b, c, x, y)
-        if _side(v, c, a, x, y) != s0 or _side(v, a, b, x, y) != s0:
-            continue
-        w0 = (v[c, 0] - v[b, 0]) * (y - v[b, 1]) - (v[c, 1] - v[b, 1]) * (x - v[b, 0])
-        w1 = (v[a, 0] - v[c, 0]) * (y - v[c, 1]) - (v[a, 1] - v[c, 1]) * (x - v[c, 0])
-        w2 = (v[b, 0] - v[a, 0]) * (y - v[a, 1]) - (v[b, 1] - v[a, 1]) * (x - v[a, 0])
-        w = w0 + w1 + w2
-        if w != 0.0 and (w0 * v[a, 2] + w1 * v[b, 2] + w2 * v[c, 2]) / w > z:
-            total += s0
-    return total
-
-
-@njit(cache=True)
-def _point_inside(v, f, first, flo, fhi, ftop, lo, hi, skip, x, y, z, tests) -> bool:  # pragma: no cover
-    """True if (x, y, z) lies inside a hull other than ``skip`` whose box strictly holds it; ``tests[0]``
-    counts the hulls tried."""
-    for k in range(first.shape[0] - 1):
-        if k == skip or not (lo[k, 0] < x < hi[k, 0] and lo[k, 1] < y < hi[k, 1] and lo[k, 2] < z < hi[k, 2]):
-            continue
-        tests[0] += 1
-        if _crossings_of(v, f, first[k], first[k + 1], flo, fhi, ftop, x, y, z) > 0:
-            return True
-    return False
-
-
-@njit(cache=True)
-def _inside_any_kernel(v, f, first, flo, fhi, ftop, lo, hi, skip, q, out) -> int:  # pragma: no cover
-    tests = np.zeros(1, np.int64)
-    for i in range(q.shape[0]):
-        out[i] = _point_inside(v, f, first, flo, fhi, ftop, lo, hi, skip, q[i, 0], q[i, 1], q[i, 2], tests)
-    return tests[0]
-
-
-@njit(cache=True)
-def _segments_kernel(v, f, first, flo, fhi, ftop, lo, hi, skip, start, end, counts, stride, out) -> int:  # pragma: no cover
-    tests = np.zeros(1, np.int64)
-    for s in range(start.shape[0]):
-        c = counts[s]
-        inv = 1.0 / (c - 1)
-        for phase in range(2):  # every stride-th sample, then the rest
-            for i in range(c):
-                if (i % stride == 0) != (phase == 0):
-                    continue
-                t = 1.0 if i == c - 1 else i * inv  # np.linspace(0, 1, c)[i], bit for bit
-                x = start[s, 0] + t * (end[s, 0] - start[s, 0])
-                y = start[s, 1] + t * (end[s, 1] - start[s, 1])
-                z = start[s, 2] + t * (end[s, 2] - start[s, 2])
-                if _point_inside(v, f, first, flo, fhi, ftop, lo, hi, skip, x, y, z, tests):
-                    out[s] = True
-                    break
-            if out[s]:
-                break
-    return tests[0]

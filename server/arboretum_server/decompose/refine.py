@@ -4,10 +4,11 @@ hulls and secondary branches of the lobes it creates (one Dijkstra on the cached
 step 2 against the cached main branches; a kept lobe wrapped round the main branch where a new branch
 must start is carved, ``carve.unwrap``), then the radii and records. A lobe that loses points to
 ``insert_lobe`` is rebuilt like a new one (centre, hull, branch). A kept lobe's branch that would run
-through a new lobe is carved out of it (``_give_way``), or, when that fails, routed again with them.
-A new lobe's branch that no repair clears (it lies behind another new lobe: the outer part of a lobe,
-inserted or split off) is routed round the kept lobes alone, and the new lobes in its way are carved
-out of it (``_behind_new``).
+through a new lobe is carved out of it (``_give_way``, in several closed pieces if need be), or, when
+that fails, routed again with them. A new lobe's branch that no repair clears (it lies behind another new
+lobe: the outer part of a lobe, inserted or split off) is routed round the kept lobes alone, and the new
+lobes in its way are carved out of it (``_behind_new``); failing that, its centre moves to one of its own
+points that a straight branch reaches clear (``_moved_centre``).
 Lobes keep their order; new ones come last (a lobe that loses all its points is dropped). Point indices
 refer to ``Decomposition.points``; strokes are in the HBL's output frame.
 """
@@ -23,7 +24,7 @@ import numpy as np
 from arboretum_library.errors import InputError
 
 from .carve import carve_lobe
-from .clear import bent_fallback, boxes, foreign, straight_fallback
+from .clear import bent_fallback, boxes, foreign, inside_foreign, straight_fallback
 from .lobes import inside
 from .merge import resample_step, sample_polylines
 from .secondary import make_lobes, zone_sources, zones
@@ -139,12 +140,14 @@ def _give_way(lobes: list[LobeState], n_kept: int, cross: list[int], pts: np.nda
               step: float = 0.0025) -> None:
     """Carve the kept branches of ``cross`` out of the new lobes (indices >= ``n_kept``) they enter (in
     place): rebuilding a new lobe's hull is cheaper than routing a kept branch round it again, and the
-    tree the user already has keeps its branches."""
+    tree the user already has keeps its branches. The carved hull may fall into several closed pieces: a
+    lobe merged from clusters either side of the trunk wraps it, and no one-piece shape keeps the branches
+    leaving the trunk there out (helper-115's sweep: 8 far merges left 1-9 crossings routing them again)."""
     wood = sample_polylines([lobes[i].segment for i in cross], step)
     for k in range(n_kept, len(lobes)):
         if _enters(lobes[k], wood):  # the other new branches stay blockers: keep _behind_new's tunnels open
             rest = sample_polylines([lobes[i].segment for i in range(n_kept, len(lobes)) if i != k], step)
-            carve_lobe(lobes, k, pts, np.concatenate([wood, rest]), radius)
+            carve_lobe(lobes, k, pts, np.concatenate([wood, rest]), radius, pieces=True)
 
 
 def _enters(lb: LobeState, wood: np.ndarray) -> bool:
@@ -157,13 +160,14 @@ def _enters(lb: LobeState, wood: np.ndarray) -> bool:
 def _behind_new(lobes: list[LobeState], n_kept: int, d: Decomposition, step: float = 0.0025) -> None:
     """A new lobe (index >= ``n_kept``) whose own branch still crosses a lobe (no repair of ``make_lobes``
     cleared it) gets the straight or bent repair among the kept lobes alone, and the other new lobes in
-    its way are carved out of it, when that clears it (in place; else nothing changes).
+    its way are carved out of it, when that clears it (in place; else its centre moves, ``_moved_centre``).
 
     Such a lobe lies behind another new one: the outer part of a lobe that was inserted or split off,
     with the part left between it and the main branches, so every route to it runs through that part.
     The new lobes are rebuilt by this operation anyway. A re-carved hull keeps out of the new blockers
-    only and may fill a tunnel cut before for another branch: ``_entered`` refuses such a result, and
-    ``_give_way`` keeps the other new branches as blockers when it carves a new lobe again.
+    only and may fill a tunnel cut before for another branch: ``_entered`` refuses such a result, and the
+    carving is tried again with every other branch as a blocker too (``_give_way`` likewise keeps the
+    other new branches as blockers when it carves a new lobe again).
     """
     tol = d.options.step / 2
     for j in range(n_kept, len(lobes)):
@@ -171,15 +175,52 @@ def _behind_new(lobes: list[LobeState], n_kept: int, d: Decomposition, step: flo
             continue
         sub = [*lobes[:n_kept], lobes[j]]
         route = straight_fallback(sub, n_kept, d.mains) or bent_fallback(sub, n_kept, d.mains, d.points)
-        if route is None:
-            continue
+        if route is None or not _carve_route(lobes, n_kept, j, route, d, step):
+            _moved_centre(lobes, j, d)
+
+
+def _carve_route(lobes: list[LobeState], n_kept: int, j: int, route: tuple[np.ndarray, int, int],
+                 d: Decomposition, step: float) -> bool:
+    """Give new lobe ``j`` the branch ``route`` (segment, parent, vertex), carving it out of the other new
+    lobes it enters, with the route alone as blocker, else with every other branch too; True (and
+    ``lobes`` updated) when the route is then clear and no branch enters a re-carved hull it stayed out of."""
+    tol = d.options.step / 2
+    wood = sample_polylines([route[0]], step)
+    enters = [k for k in range(n_kept, len(lobes)) if k != j and _enters(lobes[k], wood)]
+    for with_others in (False, True):
         trial = list(lobes)
-        wood = sample_polylines([route[0]], step)
-        carved = [k for k in range(n_kept, len(lobes)) if k != j and _enters(trial[k], wood)
-                  and carve_lobe(trial, k, d.points, wood, d.options.alpha_radius)]
+        carved = []
+        for k in enters:
+            others = [lb.segment for i, lb in enumerate(lobes) if i not in (j, k)] if with_others else []
+            blockers = np.concatenate([wood, sample_polylines(others, step)]) if others else wood
+            if carve_lobe(trial, k, d.points, blockers, d.options.alpha_radius):
+                carved.append(k)
         trial[j] = replace(trial[j], segment=route[0], parent=route[1], parent_vertex=route[2])
         if not foreign(trial, j, route[0], tol, boxes(trial)) and not _entered(lobes, trial, carved, tol):
             lobes[:] = trial
+            return True
+        if not carved:
+            break  # nothing was carved: more blockers change nothing
+    return False
+
+
+def _moved_centre(lobes: list[LobeState], j: int, d: Decomposition, tries: int = 32) -> None:
+    """Lobe ``j``'s centre moved to one of its own points outside every other lobe that a straight branch
+    reaches clear (every (n // ``tries``)-th of its n points by distance from the old centre, nearest
+    first), with that branch (in place; nothing changes when none does). The last resort for a lobe
+    whose centre lies in a pocket every route to which runs through other lobes: a lobe merged from two
+    clusters either side of the trunk has its mean near the trunk, among the lobes round it
+    (``part_overlaps`` moves a centre the same way when it lies inside another lobe)."""
+    own = d.points[lobes[j].members]
+    own = own[np.argsort(np.linalg.norm(own - lobes[j].centre, axis=1), kind="stable")]
+    own = own[:: max(1, len(own) // tries)]
+    for c in own[~inside_foreign(lobes, j, own)]:
+        trial = list(lobes)
+        trial[j] = replace(lobes[j], centre=c)
+        route = straight_fallback(trial, j, d.mains)
+        if route is not None:
+            lobes[j] = replace(trial[j], segment=route[0], parent=route[1], parent_vertex=route[2])
+            return
 
 
 def _entered(before: list[LobeState], after: list[LobeState], changed: list[int], tol: float) -> bool:

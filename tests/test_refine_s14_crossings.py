@@ -1,0 +1,89 @@
+"""Refinement adds no crossing (session 14, helper-115): helper-111's sweep found 10 of 1,938 operations on
+the pines that left a secondary branch through a lobe it does not feed. Far merges: the merged lobe wraps
+the trunk, no one-piece carving of it clears the kept branches it swallows, and their routes start on the
+trunk inside it (now: ``_give_way`` may carve it into several closed pieces; a merged centre enclosed by
+the lobes round the trunk moves to one of its own points, ``refine._moved_centre``). "Around" inserts:
+the lobe's 4-point remnant lies behind the inserted lobe, whose re-carving round the remnant's route
+swallowed another new branch (now: carved again with every other branch as a blocker too)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+
+@pytest.fixture(scope="module")
+def leaf_on_pine():
+    from arboretum_server.decompose.options import DecomposeOptions
+    from arboretum_server.decompose.pipeline import decompose
+    from arboretum_server.decompose.report import CASES, grow_truth
+    from arboretum_server.decompose.toytree import toy_scan
+
+    truth = grow_truth("harmonic", "pine", 1)
+    pts, _ = toy_scan(truth, n=40000, noise=0.002 * float(np.ptp(truth.positions[:, 2])), seed=1,
+                      **CASES["leaf-on"])
+    return decompose(pts, DecomposeOptions(species="pine"))
+
+
+def _assert_clear(before, after, n_new: int) -> None:
+    """0 crossings (evaluate's, 2 mm deep at the 0.8 m scale, and the repairs' own: any sample inside a
+    foreign hull) and every lobe, the ``n_new`` new ones last, with its own branch ending at its centre."""
+    from arboretum_library.model import Level
+    from arboretum_server.decompose.clear import foreign
+    from arboretum_server.decompose.evaluate import crossings
+
+    assert crossings(before.hbl) == 0
+    assert crossings(after.hbl) == 0
+    lobes = list(after.lobes)
+    assert not [j for j, lb in enumerate(lobes) if foreign(lobes, j, lb.segment, after.options.step / 2)]
+    kept = {id(lb.members) for lb in before.lobes}
+    new = [lb for lb in lobes if id(lb.members) not in kept]
+    assert len(new) >= n_new
+    for lb in new:
+        assert lb.parent >= 0 and len(lb.segment) >= 2
+        assert np.allclose(lb.segment[-1], lb.centre) and np.allclose(lb.segment[0], after.mains.segments[lb.parent][lb.parent_vertex])
+    branches = [lb.branch for lb in after.hbl.lobes]
+    assert len(set(branches)) == len(branches)
+    assert all(after.hbl.branches[b].level == Level.SECONDARY for b in branches)
+
+
+@pytest.mark.parametrize("pair", [(12, 20), (20, 28)])
+def test_a_far_merge_round_the_trunk_adds_no_crossing(leaf_on_pine, pair):
+    # Before: (12, 20) left 1 kept branch crossing (lobe 6, 3.4 cm deep into the merged lobe and the lobes
+    # round the trunk), (20, 28) left 9 (the merged lobe's own included).
+    from arboretum_server.decompose.refine import merge_lobes
+
+    out = merge_lobes(leaf_on_pine, list(pair))
+    assert len(out.lobes) == len(leaf_on_pine.lobes) - 1
+    _assert_clear(leaf_on_pine, out, 1)
+
+
+def test_an_around_insert_leaves_its_remnant_a_clear_branch(leaf_on_pine):
+    # helper-111's "around" selection of lobe 36: the lobe points within 0.35 of the lobe's extent round
+    # its centre. The lobe keeps 4 points, behind the inserted lobe; before, its branch ran 2.9 cm deep
+    # through 3 lobes round the trunk.
+    from arboretum_server.decompose.refine import insert_lobe
+
+    d = leaf_on_pine
+    lb = d.lobes[36]
+    extent = float(np.linalg.norm(np.ptp(d.points[lb.members], axis=0)))
+    inlobe = np.flatnonzero(d.lobe_of >= 0)
+    around = inlobe[np.linalg.norm(d.points[inlobe] - lb.centre, axis=1) < 0.35 * extent]
+    out = insert_lobe(d, around)
+    assert len(out.lobes) == len(d.lobes) + 1
+    assert sorted(len(x.members) for x in out.lobes)[0] == 4  # the remnant
+    _assert_clear(d, out, 2)
+
+
+def test_a_carving_that_splits_a_shape_is_kept_only_when_pieces_are_allowed():
+    from arboretum_server.decompose.lobes import carved_hull, inside, is_closed_manifold
+
+    rng = np.random.default_rng(3)
+    blob = rng.normal(size=(400, 3)) * [0.05, 0.02, 0.02]  # a cigar along x
+    wall = np.stack(np.meshgrid([0.0], np.linspace(-0.1, 0.1, 41), np.linspace(-0.1, 0.1, 41)), -1).reshape(-1, 3)
+    assert carved_hull(blob, 0.08, None) is not None
+    assert carved_hull(blob, 0.08, wall) is None  # the wall across its middle leaves two pieces
+    v, f = carved_hull(blob, 0.08, wall, pieces=True)
+    assert is_closed_manifold(f, one_piece=False) and not is_closed_manifold(f)
+    assert inside(v, f, np.array([[-0.05, 0, 0], [0.05, 0, 0]])).all()
+    assert not inside(v, f, np.array([[0.0, 0, 0]])).any()
