@@ -148,7 +148,7 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
         lobes[j] = replace(lobes[j], segment=seg, parent=parent, parent_vertex=pv)
     rerouted = 0
     box = boxes(lobes)
-    route = _Route(pts, adjacency, root, zone, mains, grid, tau, o, refs, tree)
+    route = _Route(pts, adjacency, root, zone, mains, grid, tau, o, refs, tree, {})
     for j in range(len(others), len(lobes)):
         seg = clear_smooth(lobes, j, raw[j - len(others)], lobes[j].segment, o.step / 2, box, tree)
         if seg is not None:
@@ -189,6 +189,33 @@ class _Route(NamedTuple):
     o: DecomposeOptions
     refs: tuple
     tree: cKDTree
+    cache: dict
+    """The per-edge zone weights of ``foreign_graph``, built at the first reroute of a ``make_lobes`` call."""
+
+
+def _edge_zones(adjacency: csr_matrix, zone: np.ndarray) -> tuple[csr_matrix, np.ndarray, np.ndarray]:
+    """The graph in CSR form, its edge lengths with every zone edge ``FOREIGN_COST`` dearer, and per edge
+    the lobe whose zone holds all its zoned ends (-1 for none or several). Built once per ``make_lobes``:
+    reweighting the whole graph again for each rerouted branch repeated the same gathers."""
+    adj = adjacency.tocsr()
+    rows = np.repeat(np.arange(adj.shape[0]), np.diff(adj.indptr))
+    zr, zc = zone[rows], zone[adj.indices]
+    hi = np.maximum(zr, zc)
+    dear = adj.data * np.where(hi >= 0, FOREIGN_COST, 1.0)
+    one = ((zr == hi) | (zr < 0)) & ((zc == hi) | (zc < 0))
+    return adj, dear, np.where(one, hi, -1)
+
+
+def foreign_graph(r: _Route, j: int) -> csr_matrix:
+    """``weighted(adjacency, cost)`` for lobe ``j``'s reroute (zone ``j`` edges ``ZONE_COST`` longer, other
+    zones' ``FOREIGN_COST``), the same weights bit for bit, from the edge zones built once per call."""
+    if not r.cache:
+        r.cache["edges"] = _edge_zones(r.adjacency, r.zone)
+    adj, dear, owner = r.cache["edges"]
+    w = dear.copy()
+    own = np.flatnonzero(owner == j)
+    w[own] = adj.data[own] * ZONE_COST
+    return csr_matrix((w, adj.indices, adj.indptr), shape=adj.shape)
 
 
 def _reroute(lobes: list[LobeState], j: int, target: int, r: _Route, box):
@@ -196,8 +223,7 @@ def _reroute(lobes: list[LobeState], j: int, target: int, r: _Route, box):
     still enters one, the straight, bent and carved repairs in turn (``lobes[j]`` replaced in place; the
     lobes' boxes returned, new when a carving changed a hull)."""
     lb, o = lobes[j], r.o
-    cost = np.where((r.zone >= 0) & (r.zone != j), FOREIGN_COST, np.where(r.zone == j, ZONE_COST, 1.0))
-    _, p2 = shortest_paths(weighted(r.adjacency, cost), r.root)
+    _, p2 = shortest_paths(foreign_graph(r, j), r.root)
     path = branch_paths([target], p2, r.pts, r.grid, o.step)
     seg, parent, pv = merge_secondaries(path, r.mains, r.tau, o.resample, o.sc_bins, r.refs)[0]
     seg = _finish(seg, lb.centre)
