@@ -71,7 +71,7 @@ def _full_resolution_row() -> Row:
 
 def _million_row() -> Row:
     """``decompose --points 0`` on a million points of the toy tree (a full terrestrial scan's size): one run,
-    about 20 s (session 14; 34-41 s and 1.4 GB before), with each step's time."""
+    19-27 s (session 14; 39-42 s and 1.43 GB before), with each step's time."""
     from dataclasses import replace
 
     from arboretum_server.decompose.options import DecomposeOptions

@@ -72,7 +72,7 @@ def test_packed_inside_tests_match_the_lobe_by_lobe_reference(rng):
         assert WORK["hull_tests"] < count[0] / 4  # a blocked segment stops at its first sample inside
 
 
-def test_a_hull_changed_in_place_of_a_lobe_is_seen_by_the_next_inside_test(rng):
+def test_a_hull_replaced_in_a_lobe_is_seen_by_the_next_inside_test(rng):
     # The packs are kept by the ids of the hull arrays: replacing one lobe's hull (as a carving does)
     # must not reuse the pack of the hulls before.
     from dataclasses import replace
@@ -105,7 +105,7 @@ def leaf_on_pine():
 def _run_counted(monkeypatch, fn, reference: bool) -> tuple[object, int, int]:
     """(result, (point, lobe) inside tests of the repairs, carved shapes computed) of ``fn()``, with the
     fast paths or with the reference code (every sample tested lobe by lobe, nothing remembered)."""
-    from arboretum_server.decompose import carve, clear, secondary
+    from arboretum_server.decompose import carve, clear, refine, secondary
 
     tests, carvings = [0], [0]
     real = carve.carved_hull
@@ -120,7 +120,7 @@ def _run_counted(monkeypatch, fn, reference: bool) -> tuple[object, int, int]:
             def ref(lobes, j, q, box=None):
                 return _reference_inside_foreign(lobes, j, q, box, tests)
 
-            for mod in (clear, carve, secondary):
+            for mod in (clear, carve, secondary, refine):
                 m.setattr(mod, "inside_foreign", ref)
             def blocked(lobes, j, a, b, step, box):
                 return _reference_blocked(lobes, j, a, b, step, box, tests)

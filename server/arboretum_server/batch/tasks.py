@@ -49,7 +49,8 @@ def dask_setup(worker: Any) -> None:
     """Run by Dask in each LocalCluster worker as it starts (``WORKER_CONFIG``'s preload): Ctrl-C is the
     client's to handle (it cancels the tasks and shuts the cluster down), so a worker ignores SIGINT (it
     is started with SIGINT ignored too: ``signals.workers_ignore_sigint``) and does not warn about the
-    tasks cancelled then ("Async instruction ... ended with CancelledError")."""
+    tasks cancelled then ("Async instruction ... ended with CancelledError"). It also has the worker
+    freeze its heap after its first scan (``_freeze_once``)."""
     import logging
     import signal
     import threading
@@ -71,7 +72,8 @@ def _freeze_once() -> None:
     The worker process then exits in 0.04 s instead of 0.3-0.5 s (Python's collections at exit walked
     them all), and closing the cluster, which the build waits for, took 0.1 s instead of 0.7-1.6 s
     (docs/batch.md). The first task's cyclic garbage is collected first; frozen objects are still freed
-    when their last reference goes. Only in LocalCluster workers: a library function leaves another
+    when their last reference goes unless they sit in a reference cycle (a one-off, bounded leak of the
+    first task's leftovers; later tasks are not frozen). Only in LocalCluster workers: a library function leaves another
     process's collector alone."""
     if _GC["freeze"] and not _GC["frozen"]:
         _GC["frozen"] = True

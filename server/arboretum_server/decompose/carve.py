@@ -82,7 +82,8 @@ def _recall_plain(members: np.ndarray, points: np.ndarray) -> Tetrahedra | None:
 _CARVED: dict[int, tuple[weakref.ref, np.ndarray, dict]] = {}
 """Carved shapes of each lobe by the id of its ``members`` array while that lives (with the points array
 they index): by (blockers' bytes, radius, steps). ``unwrap`` carves the same lobes with the same wood each
-time a branch is routed again, and a carving it undoes is asked for again by the next branch."""
+time a branch is routed again, and a carving it undoes is asked for again by the next branch. Not locked:
+refinement runs on the server's one loop thread; lobes' arrays are never changed in place (replaced)."""
 CARVED_KEPT = 16
 """Carved shapes remembered per lobe (the oldest go first)."""
 WORK = {"carvings": 0}

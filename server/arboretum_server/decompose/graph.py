@@ -61,7 +61,8 @@ def _neighbours(tree: cKDTree, points: np.ndarray, kq: int) -> tuple[np.ndarray,
     column (the point itself) dropped; asked ``QUERY_CHUNK`` points at a time (each point's answer is its
     own, so the same as one query)."""
     n = len(points)
-    dist, nb = np.zeros((n, kq - 1)), np.zeros((n, kq - 1), np.int32)
+    index = np.int32 if n < 2**31 else np.int64  # indices wrap silently beyond int32
+    dist, nb = np.zeros((n, kq - 1)), np.zeros((n, kq - 1), index)
     for s in range(0, n, QUERY_CHUNK):
         d, j = tree.query(points[s : s + QUERY_CHUNK], k=kq)
         dist[s : s + QUERY_CHUNK] = d.reshape(len(d), -1)[:, 1:]
@@ -76,7 +77,7 @@ def knn_graph(points: np.ndarray, k: int, radius: float) -> Graph:
     kq = min(n, max(k, CANDIDATES) + 1)
     dist, nb = _neighbours(tree, points, kq)
     rows, col = np.nonzero(dist[:, :k] <= radius)
-    adj = _edges(rows.astype(np.int32), nb[rows, col], np.maximum(dist[rows, col], 1e-12), n)
+    adj = _edges(rows.astype(nb.dtype), nb[rows, col], np.maximum(dist[rows, col], 1e-12), n)
     del rows, col
     ncomp, lab = connected_components(adj, directed=False)
     if ncomp == 1:

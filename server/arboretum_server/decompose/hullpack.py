@@ -46,7 +46,8 @@ def pack_hull(vertices: np.ndarray, faces: np.ndarray) -> HullPack:
 def join_packs(packs: list[HullPack]) -> HullPack:
     """One ``HullPack`` of the hulls of ``packs`` (one hull each), in order."""
     if not packs:
-        return pack_hull(np.zeros((0, 3)), np.zeros((0, 3), np.int64))
+        empty = pack_hull(np.zeros((0, 3)), np.zeros((0, 3), np.int64))
+        return empty._replace(first=np.zeros(1, np.int64))  # no hull at all, not one empty hull
     shift = np.cumsum([0] + [len(p.vertices) for p in packs[:-1]])
     return HullPack(np.concatenate([p.vertices for p in packs]),
                     np.concatenate([p.faces + s for p, s in zip(packs, shift)]),

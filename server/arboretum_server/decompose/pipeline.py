@@ -168,7 +168,7 @@ def decompose(points: np.ndarray, options: DecomposeOptions = DecomposeOptions()
     clock.lap("graph")
     lab = prep.labels if prep.labels is not None else separate(pts, g.neighbours, o.leaf_dimension)
     clock.lap("separate")
-    tree = g.tree if g.tree is not None else cKDTree(pts)  # the same KD-tree: built once
+    tree = g.tree  # the graph's KD-tree of the same points: built once
     mains = main_branches(pts, lab, g, root, grid, tau, o, tree)
     clock.lap("mains")
     bare = bare_trunk(pts, mains) if prep.labels is None else None  # guessed labels: bare trunk is wood

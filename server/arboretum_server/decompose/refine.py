@@ -200,7 +200,7 @@ def _carve_route(lobes: list[LobeState], n_kept: int, j: int, route: tuple[np.nd
             lobes[:] = trial
             return True
         if not carved:
-            break  # nothing was carved: more blockers change nothing
+            break  # no carving succeeded with the route alone: not retried with more blockers (not measured)
     return False
 
 
