@@ -1,7 +1,7 @@
 """Many closed hulls tested at once: every hull's faces with their XY boxes and top packed once into flat
 arrays (``HullPack``), then points (``inside_any``) or sampled segments (``segments_blocked``) tested in one
 compiled loop that stops at the first hull holding a point. Each answer is the one ``lobes.inside`` gives
-hull by hull (the same ray-crossing count, ``lobes._side`` included), for the refinement repairs
+hull by hull (the same ray-crossing count, ``lobes._crossings_of``), for the refinement repairs
 (``clear.inside_foreign``, ``clear._blocked``) that ask it of every lobe of a tree many times over.
 """
 
@@ -12,7 +12,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from .lobes import _side
+from .lobes import _crossings_of
 
 
 class HullPack(NamedTuple):
@@ -81,26 +81,6 @@ def segments_blocked(pack: HullPack, lo: np.ndarray, hi: np.ndarray, skip: int, 
                              np.ascontiguousarray(start, np.float64), np.ascontiguousarray(end, np.float64),
                              np.ascontiguousarray(counts, np.int64), int(stride), out)
     return out, int(tests)
-
-
-@njit(cache=True)
-def _crossings_of(v, f, t0, t1, flo, fhi, ftop, x, y, z) -> int:  # pragma: no cover - numba
-    """Signed crossings of the ray up from (x, y, z) through faces t0:t1 (``_crossing_kernel``'s sum)."""
-    total = 0
-    for t in range(t0, t1):
-        if x < flo[t, 0] or x > fhi[t, 0] or y < flo[t, 1] or y > fhi[t, 1] or z > ftop[t]:
-            continue
-        a, b, c = f[t, 0], f[t, 1], f[t, 2]
-        s0 = _side(v, b, c, x, y)
-        if _side(v, c, a, x, y) != s0 or _side(v, a, b, x, y) != s0:
-            continue
-        w0 = (v[c, 0] - v[b, 0]) * (y - v[b, 1]) - (v[c, 1] - v[b, 1]) * (x - v[b, 0])
-        w1 = (v[a, 0] - v[c, 0]) * (y - v[c, 1]) - (v[a, 1] - v[c, 1]) * (x - v[c, 0])
-        w2 = (v[b, 0] - v[a, 0]) * (y - v[a, 1]) - (v[b, 1] - v[a, 1]) * (x - v[a, 0])
-        w = w0 + w1 + w2
-        if w != 0.0 and (w0 * v[a, 2] + w1 * v[b, 2] + w2 * v[c, 2]) / w > z:
-            total += s0
-    return total
 
 
 @njit(cache=True)

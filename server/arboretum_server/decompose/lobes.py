@@ -320,6 +320,26 @@ def _side(v: np.ndarray, a: int, b: int, x: float, y: float) -> int:  # pragma: 
 
 
 @njit(cache=True)
+def _crossings_of(v, f, t0, t1, flo, fhi, ftop, x, y, z) -> int:  # pragma: no cover - numba
+    """Signed crossings of the ray up from (x, y, z) through faces t0:t1 (``_crossing_kernel``'s sum)."""
+    total = 0
+    for t in range(t0, t1):
+        if x < flo[t, 0] or x > fhi[t, 0] or y < flo[t, 1] or y > fhi[t, 1] or z > ftop[t]:
+            continue
+        a, b, c = f[t, 0], f[t, 1], f[t, 2]
+        s0 = _side(v, b, c, x, y)
+        if _side(v, c, a, x, y) != s0 or _side(v, a, b, x, y) != s0:
+            continue
+        w0 = (v[c, 0] - v[b, 0]) * (y - v[b, 1]) - (v[c, 1] - v[b, 1]) * (x - v[b, 0])
+        w1 = (v[a, 0] - v[c, 0]) * (y - v[c, 1]) - (v[a, 1] - v[c, 1]) * (x - v[c, 0])
+        w2 = (v[b, 0] - v[a, 0]) * (y - v[a, 1]) - (v[b, 1] - v[a, 1]) * (x - v[a, 0])
+        w = w0 + w1 + w2
+        if w != 0.0 and (w0 * v[a, 2] + w1 * v[b, 2] + w2 * v[c, 2]) / w > z:
+            total += s0
+    return total
+
+
+@njit(cache=True)
 def _crossing_kernel(v: np.ndarray, f: np.ndarray, q: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - numba
     lo = np.zeros((f.shape[0], 2))
     hi = np.zeros((f.shape[0], 2))
@@ -330,19 +350,4 @@ def _crossing_kernel(v: np.ndarray, f: np.ndarray, q: np.ndarray, out: np.ndarra
             hi[t, k] = max(v[f[t, 0], k], v[f[t, 1], k], v[f[t, 2], k])
         zmax[t] = max(v[f[t, 0], 2], v[f[t, 1], 2], v[f[t, 2], 2])
     for i in range(q.shape[0]):
-        x, y, z = q[i, 0], q[i, 1], q[i, 2]
-        total = 0
-        for t in range(f.shape[0]):
-            if x < lo[t, 0] or x > hi[t, 0] or y < lo[t, 1] or y > hi[t, 1] or z > zmax[t]:
-                continue
-            a, b, c = f[t, 0], f[t, 1], f[t, 2]
-            s0 = _side(v, b, c, x, y)
-            if _side(v, c, a, x, y) != s0 or _side(v, a, b, x, y) != s0:
-                continue
-            w0 = (v[c, 0] - v[b, 0]) * (y - v[b, 1]) - (v[c, 1] - v[b, 1]) * (x - v[b, 0])
-            w1 = (v[a, 0] - v[c, 0]) * (y - v[c, 1]) - (v[a, 1] - v[c, 1]) * (x - v[c, 0])
-            w2 = (v[b, 0] - v[a, 0]) * (y - v[a, 1]) - (v[b, 1] - v[a, 1]) * (x - v[a, 0])
-            w = w0 + w1 + w2
-            if w != 0.0 and (w0 * v[a, 2] + w1 * v[b, 2] + w2 * v[c, 2]) / w > z:
-                total += s0
-        out[i] = total
+        out[i] = _crossings_of(v, f, 0, f.shape[0], lo, hi, zmax, q[i, 0], q[i, 1], q[i, 2])
