@@ -10,13 +10,13 @@ which reuses each lobe's plain tetrahedralisation (``remember_plain``) while its
 from __future__ import annotations
 
 import hashlib
-import weakref
 from dataclasses import replace
 
 import numpy as np
 
 from .clear import boxes, inside_foreign, main_vertices
 from .lobes import RADIUS_STEPS, Tetrahedra, carved_hull, inside, plain_steps
+from .memo import ArrayMemo
 from .merge import BranchSet, sample_polylines
 from .state import LobeState
 
@@ -56,31 +56,24 @@ def unwrap(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, ra
     return changed
 
 
-_PLAIN: dict[int, tuple[weakref.ref, Tetrahedra]] = {}
-"""The plain tetrahedralisation of each lobe, by the id of its ``members`` array, while that array lives
+_PLAIN = ArrayMemo()
+"""The plain tetrahedralisation of each lobe, by its ``members`` array, while that array lives
 (kept lobes share it across refinements; not part of ``LobeState``, so it never travels with one)."""
 
 
 def remember_plain(members: np.ndarray, tet: Tetrahedra) -> None:
     """Keep ``tet`` (``Tetrahedra`` of the points ``members`` indexes) for ``carve_lobe`` while ``members`` lives."""
-    key = id(members)
-
-    def forget(ref: weakref.ref, key: int = key) -> None:
-        if _PLAIN.get(key, (None,))[0] is ref:
-            del _PLAIN[key]
-
-    _PLAIN[key] = (weakref.ref(members, forget), tet)
+    _PLAIN.put(members, tet)
 
 
 def _recall_plain(members: np.ndarray, points: np.ndarray) -> Tetrahedra | None:
     """The ``Tetrahedra`` remembered for ``members`` if it was built from ``points`` (its lobe's points)."""
-    hit = _PLAIN.get(id(members))
-    ok = hit is not None and hit[0]() is members and np.array_equal(hit[1].source, points)
-    return hit[1] if ok else None
+    tet = _PLAIN.get(members)
+    return tet if tet is not None and np.array_equal(tet.source, points) else None
 
 
-_CARVED: dict[int, tuple[weakref.ref, np.ndarray, dict]] = {}
-"""Carved shapes of each lobe by the id of its ``members`` array while that lives (with the points array
+_CARVED = ArrayMemo()
+"""Carved shapes of each lobe by its ``members`` array while that lives (with the points array
 they index): by (blockers' bytes, radius, steps). ``unwrap`` carves the same lobes with the same wood each
 time a branch is routed again, and a carving it undoes is asked for again by the next branch. Not locked:
 refinement runs on the server's one loop thread; lobes' arrays are never changed in place (replaced)."""
@@ -93,17 +86,10 @@ WORK = {"carvings": 0}
 def _carved(members: np.ndarray, pts: np.ndarray) -> dict:
     """The carved shapes remembered for ``members`` indexing ``pts`` (a new, empty store if none): the
     lobe's points, its ``steps`` and ``alpha`` and the blockers decide the shape."""
-    key = id(members)
-    hit = _CARVED.get(key)
-    if hit is not None and hit[0]() is members and hit[1] is pts:
-        return hit[2]
-
-    def forget(ref: weakref.ref, key: int = key) -> None:
-        if _CARVED.get(key, (None,))[0] is ref:
-            del _CARVED[key]
-
-    _CARVED[key] = (weakref.ref(members, forget), pts, {})
-    return _CARVED[key][2]
+    hit = _CARVED.get(members)
+    if hit is not None and hit[0] is pts:
+        return hit[1]
+    return _CARVED.put(members, (pts, {}))[1]
 
 
 def carve_lobe(lobes: list[LobeState], k: int, pts: np.ndarray, blockers: np.ndarray, radius: float,

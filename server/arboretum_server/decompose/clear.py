@@ -16,13 +16,13 @@ inside one (session 14: the same answers as testing every sample lobe by lobe, a
 from __future__ import annotations
 
 import threading
-import weakref
 from collections import OrderedDict
 from operator import attrgetter
 
 import numpy as np
 
 from .hullpack import HullPack, inside_any, join_packs, pack_hull, segments_blocked
+from .memo import ArrayMemo
 from .merge import BranchSet, resample_step
 from .state import LobeState
 
@@ -37,25 +37,17 @@ hull changes."""
 PACKS_KEPT = 8
 _PACKS_LOCK = threading.Lock()
 _VERTICES, _FACES = attrgetter("hull_vertices"), attrgetter("hull_faces")
-_HULLS: dict[int, tuple[weakref.ref, np.ndarray, HullPack, np.ndarray, np.ndarray]] = {}
-"""Each hull's own ``HullPack`` and box (lo (3,), hi (3,)), by the id of its vertex array while that lives."""
+_HULLS = ArrayMemo()
+"""Each hull's faces, own ``HullPack`` and box (lo (3,), hi (3,)), by its vertex array while that lives."""
 
 
 def _hull(lb: LobeState) -> tuple[HullPack, np.ndarray, np.ndarray]:
     """Lobe ``lb``'s hull as a ``HullPack`` with its box, built once per hull."""
     verts, faces = lb.hull_vertices, lb.hull_faces
-    hit = _HULLS.get(id(verts))
-    if hit is not None and hit[0]() is verts and hit[1] is faces:
-        return hit[2], hit[3], hit[4]
-    key = id(verts)
-
-    def forget(ref: weakref.ref, key: int = key) -> None:
-        if _HULLS.get(key, (None,))[0] is ref:
-            del _HULLS[key]
-
-    out = (pack_hull(verts, faces), verts.min(axis=0), verts.max(axis=0))
-    _HULLS[key] = (weakref.ref(verts, forget), faces, *out)
-    return out
+    hit = _HULLS.get(verts)
+    if hit is not None and hit[0] is faces:
+        return hit[1:]
+    return _HULLS.put(verts, (faces, pack_hull(verts, faces), verts.min(axis=0), verts.max(axis=0)))[1:]
 
 
 def _packed(lobes: list[LobeState]) -> tuple[HullPack, tuple[np.ndarray, np.ndarray]]:
