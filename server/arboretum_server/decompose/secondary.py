@@ -208,7 +208,8 @@ def _edge_zones(adjacency: csr_matrix, zone: np.ndarray) -> tuple[csr_matrix, np
 
 def foreign_graph(r: _Route, j: int) -> csr_matrix:
     """``weighted(adjacency, cost)`` for lobe ``j``'s reroute (zone ``j`` edges ``ZONE_COST`` longer, other
-    zones' ``FOREIGN_COST``), the same weights bit for bit, from the edge zones built once per call."""
+    zones' ``FOREIGN_COST``), the same weights bit for bit, from the edge zones built once per call (an edge
+    takes its dearer end's cost, as in ``weighted``: this relies on 1 <= ``ZONE_COST`` <= ``FOREIGN_COST``)."""
     if not r.cache:
         r.cache["edges"] = _edge_zones(r.adjacency, r.zone)
     adj, dear, owner = r.cache["edges"]
