@@ -44,6 +44,8 @@ def register(subparsers) -> None:
                    help="species of the --scan tree: N_m and N_l from VRTree Table 2 (default: unknown, 8 and 40)")
     p.add_argument("--main", type=int, metavar="N", help="main branches of the --scan decomposition (overrides --species)")
     p.add_argument("--lobes", type=int, metavar="N", help="lobes of the --scan decomposition (overrides --species)")
+    p.add_argument("--leaf-off", action="store_true",
+                   help="the --scan tree bore no leaves: its points are shown and stored as wood")
     p.add_argument("--size", default="1280x720", help="window or image size WIDTHxHEIGHT (default 1280x720)")
     p.add_argument("--headless", action="store_true", help="render without a display (EGL); needs --script")
     p.add_argument("--script", metavar="S", help="JSON/YAML script of input events and tool actions")
@@ -78,9 +80,9 @@ def _port_factory(args, cleanup: list):
 
 
 def _scan(path: str | None, up: str = "auto", species: str = "unknown", main: int | None = None,
-          lobes: int | None = None):
-    """The ``app.Scan`` of ``--scan`` read with ``--up``, with ``--species``, ``--main`` and ``--lobes``,
-    or None. The counts are checked by the server when Tab opens the scan (one status line)."""
+          lobes: int | None = None, leaf_off: bool = False):
+    """The ``app.Scan`` of ``--scan`` read with ``--up``, with ``--species``, ``--main``, ``--lobes`` and
+    ``--leaf-off``, or None. The counts are checked by the server when Tab opens the scan (one status line)."""
     if not path:
         return None
     from arboretum_library.pointio import ReadOptions, read_points
@@ -89,6 +91,7 @@ def _scan(path: str | None, up: str = "auto", species: str = "unknown", main: in
 
     cloud = read_points(path, ReadOptions(up=up))
     options = {k: v for k, v in (("n_main", main), ("n_lobes", lobes)) if v is not None}
+    options |= {"leaf_off": True} if leaf_off else {}
     return Scan(cloud.points, getattr(cloud, "labels", None), Path(path).name, species, options)
 
 
@@ -125,6 +128,7 @@ def check_args(args: argparse.Namespace) -> tuple[int, int]:
     given = [f"--{k}" for k, v in counts.items() if v is not None]
     given += ["--species"] * (getattr(args, "species", "unknown") != "unknown")
     given += ["--up"] * (getattr(args, "up", "auto") != "auto")
+    given += ["--leaf-off"] * bool(getattr(args, "leaf_off", False))
     if given and not getattr(args, "scan", None):
         raise InputError(f"{', '.join(given)} apply to the --scan file, and no --scan was given")
     for k, v in counts.items():
@@ -170,7 +174,7 @@ def run(args: argparse.Namespace) -> int:
     size = check_args(args)
     args.steps = _script_steps(args)  # checked here: a bad step is one error line before any window
     args.reference_item = _reference(args)  # before the server starts: a bad image is a quick error
-    scan = _scan(args.scan, args.up, args.species, args.main, args.lobes)
+    scan = _scan(args.scan, args.up, args.species, args.main, args.lobes, args.leaf_off)
     cleanup: list = []
     try:
         factory = _port_factory(args, cleanup)

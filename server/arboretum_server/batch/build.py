@@ -62,6 +62,8 @@ class BuildOptions:
     """Decomposition: output height, metres (VRTree: 0.8)."""
     seed: int = 0
     """Decomposition seed (downsampling, FPS, k-means)."""
+    leaf_off: bool = False
+    """Decomposition: every scan is of a leafless tree; report all points wood (``DecomposeOptions.leaf_off``)."""
     rebuild: bool = False
     """Decompose scans already in the library again (this run's options), replacing their examples."""
     recursive: bool = False
@@ -203,7 +205,8 @@ def _run_cluster(lib, todo: list[ScanRecord], o: BuildOptions, result: BuildResu
         result.cluster, result.workers = name, n_workers
         by_key, futures = {}, []
         for r in todo:
-            opts = {"species": r.species, "points": o.points, "height": o.height, "seed": o.seed}
+            opts = {"species": r.species, "points": o.points, "height": o.height, "seed": o.seed,
+                    "leaf_off": o.leaf_off}
             fut = client.submit(decompose_scan, r.path, r.sha256, opts, key=f"decompose-{r.sha256}")
             by_key[fut.key] = r
             futures.append(fut)

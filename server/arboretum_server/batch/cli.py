@@ -2,7 +2,7 @@
 
     arboretum library build SCANS... --library LIB [--species S] [--workers N]
         [--scheduler tcp://HOST:8786 [--worker-timeout S]] [--report DIR] [--recursive] [--rebuild]
-        [--points 12000] [--height 0.8] [--seed 0] [--json]
+        [--points 12000] [--height 0.8] [--seed 0] [--leaf-off] [--json]
 
 SCANS are files or folders (every point-cloud file inside, and with --recursive in the folders below;
 files that are recognisably not point clouds, such as TreeQSM cylinder tables, are left out with a
@@ -36,6 +36,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--points", type=int, default=12000, metavar="N", help="downsample each scan (0: all)")
     p.add_argument("--height", type=float, default=0.8, metavar="M", help="output height in metres")
     p.add_argument("--seed", type=int, default=0, help="decomposition seed")
+    p.add_argument("--leaf-off", action="store_true",
+                   help="every scan is of a tree without leaves: report all points as wood")
     p.add_argument("--recursive", action="store_true", help="folders: read the folders below them too")
     p.add_argument("--rebuild", action="store_true",
                    help="decompose scans already in the library again, replacing their examples")
@@ -96,7 +98,7 @@ def _build(args: argparse.Namespace, folder: str) -> int:
 
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     opts = BuildOptions(species=args.species, workers=args.workers, scheduler=args.scheduler,
-                        points=args.points, height=args.height, seed=args.seed, rebuild=args.rebuild,
+                        points=args.points, height=args.height, seed=args.seed, leaf_off=args.leaf_off, rebuild=args.rebuild,
                         recursive=args.recursive, worker_timeout=args.worker_timeout)
     status = StatusLine() if not args.json else _waiting_on_stderr()
     created = not Path(args.library).exists()

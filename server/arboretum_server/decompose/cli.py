@@ -2,7 +2,7 @@
 
     arboretum decompose scan.xyz --species apple --library lib/ [--main N] [--lobes N]
         [--points 12000] [--height 0.8] [--seed 0] [--reach-weight W] [--save-hbl tree.npz] [--no-labels]
-        [--min-points 200] [--rebuild] [--json]
+        [--leaf-off] [--min-points 200] [--rebuild] [--json]
 
 A scan already in LIB (the same bytes, decomposed with the same options) is not stored again: the run
 names the examples there and stores nothing; --rebuild decomposes it again and replaces them (as
@@ -42,6 +42,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "0.5 otherwise)")
     p.add_argument("--up", choices=UP_CHOICES, default="auto", help="up axis of the file")
     p.add_argument("--no-labels", action="store_true", help="ignore leaf/wood labels stored in the file")
+    p.add_argument("--leaf-off", action="store_true",
+                   help="the tree bore no leaves when scanned: report every point as wood (the geometry is the "
+                        "same; see docs/decomposition.md)")
     p.add_argument("--save-hbl", default=None, metavar="OUT.npz", help="also save the whole-tree HBL")
     p.add_argument("--min-points", type=int, default=None, metavar="N",
                    help="fewest usable points a tree may have (default 200; down to 10 for a sparse cloud, "
@@ -75,6 +78,7 @@ def _options(args: argparse.Namespace):
     options = DecomposeOptions(
         species=args.species.lower(), n_main=args.main, n_lobes=args.lobes, points=args.points,
         height=args.height or None, seed=args.seed, use_labels=not args.no_labels, reach_weight=args.reach_weight,
+        leaf_off=args.leaf_off,
         **({} if args.min_points is None else {"min_points": args.min_points}),
     )
     check_points(options, "--points")  # before the scan is read
@@ -272,7 +276,7 @@ def _text(d: dict) -> str:
         return "\n".join([f"{d['scan']}: {d['points_read']} points read", *_stored_lines(d)])
     steps = ", ".join(f"{k} {v * 1000:.0f} ms" for k, v in d["timing_s"].items())
     return "\n".join([
-        f"{d['scan']}: {d['points_read']} points read, {s['points']} used, {s['leaf_points']} leaf, "
+        f"{d['scan']}: {d['points_read']} points read, {s['points']} used, {_leaves(s)}, "
         f"{s['ground_removed']} ground removed",
         f"graph: {counted(s['components'], 'component')} joined by {counted(s['bridges'], 'bridge')}",
         f"HBL: {s['main_branches']} main branches, {s['lobes']} lobes ({s['alpha_shapes']} alpha shapes, "
@@ -280,6 +284,13 @@ def _text(d: dict) -> str:
         f"time: {steps} (total {sum(d['timing_s'].values()):.2f} s)",
         *_stored_lines(d),
     ])
+
+
+def _leaves(s: dict) -> str:
+    """'N leaf', or for a declared leaf-off tree what the separation still found (it steers the routing)."""
+    if s["labels"] == "leaf-off":
+        return f"0 leaf (declared leaf-off; {s['fine_wood_points']} points of fine wood)"
+    return f"{s['leaf_points']} leaf"
 
 
 def _stored_lines(d: dict) -> list[str]:

@@ -76,6 +76,7 @@ def run_key(prov: Provenance, up_axis: str | None = None) -> str:
     params = {k: float(v) if isinstance(v, int | float) and not isinstance(v, bool) else v
               for k, v in prov.parameters.items() if k not in RUN_RECORDS}
     params.setdefault(UP_AXIS_KEY, up_axis)
+    params.setdefault("leaf_off", False)  # stored before session 15: there was no such option
     return json.dumps([prov.species, params], sort_keys=True)
 
 

@@ -121,6 +121,12 @@ class DecomposeOptions:
     plane sample the ground, and at least this much above the plane is cut (``preprocess.find_ground``)."""
     use_labels: bool = True
     """Use leaf/wood labels given with the input instead of the separation heuristic."""
+    leaf_off: bool = False
+    """The tree bore no leaves when scanned (the user says so: a winter scan): every point is reported
+    wood (``HBL.labels``, the leaf count). No test of the cloud itself tells leaf-off from leaf-on well
+    enough (session 13: about 45 statistics measured), so it is declared. The guessed split still steers
+    routing and lobes as without the flag ("leaf" in a bare crown is fine, space-filling wood, which the
+    main branches are kept out of), so the geometry is the same; ``stats['fine_wood_points']`` counts it."""
     leaf_dimension: float = 2.1
     """Leaf/wood separation: points whose smoothed local dimension exceeds this are foliage."""
     leaf_off_fraction: float = 0.1
@@ -165,8 +171,9 @@ def check_options(o: DecomposeOptions) -> None:
     limits (``WHOLE_LIMITS``, ``REAL_LIMITS``, ``OPTIONAL``)."""
     if not isinstance(o.species, str):
         _refuse("species", "must be text", o.species)
-    if not isinstance(o.use_labels, bool | np.bool_):
-        _refuse("use_labels", "must be true or false", o.use_labels)
+    for name in ("use_labels", "leaf_off"):
+        if not isinstance(getattr(o, name), bool | np.bool_):
+            _refuse(name, "must be true or false", getattr(o, name))
     for name, (lo, hi) in WHOLE_LIMITS.items():
         value = getattr(o, name)
         if value is None and name in OPTIONAL:

@@ -185,17 +185,18 @@ def decompose(points: np.ndarray, options: DecomposeOptions = DecomposeOptions()
     clock.lap("secondary")
     lobe_of = np.full(len(pts), -1, np.int32)
     lobe_of[fol] = k_lab
+    said = np.zeros_like(lab) if o.leaf_off else lab  # declared leaf-off: all wood, the geometry as guessed
     stats = {
-        "points": len(pts), "height": WORK_HEIGHT / prep.scale, "leaf_points": int((lab == LEAF).sum()),
+        "points": len(pts), "height": WORK_HEIGHT / prep.scale, "leaf_points": int((said == LEAF).sum()),
         "ground_removed": prep.ground_removed, "repeated": prep.repeats.as_stats(), "strays": prep.strays,
         "trunk_columns": [c._asdict() | {"foot": list(c.foot)} for c in prep.columns], "width_ratio": width_ratio(pts),
-        "labels": "given" if prep.labels is not None else "guessed",
+        "labels": "leaf-off" if o.leaf_off else "given" if prep.labels is not None else "guessed",
         "components": g.components, "bridges": g.bridges, "foliage_source": source,
         "main_branches": len(mains.segments), "lobes": len(lobes), "rerouted": rerouted,
         "alpha_shapes": sum(lb.alpha for lb in lobes), "hull_fallbacks": sum(not lb.alpha for lb in lobes),
         "merge_threshold": tau,
-    }
-    d = Decomposition(None, pts, lab, root, pred2, mains, tuple(lobes), lobe_of, r_trunk, o,  # type: ignore[arg-type]
+    } | ({"fine_wood_points": int((lab == LEAF).sum())} if o.leaf_off else {})
+    d = Decomposition(None, pts, said, root, pred2, mains, tuple(lobes), lobe_of, r_trunk, o,  # type: ignore[arg-type]
                       prep.scale, prep.root_scan, prep.source_index, g.adjacency, clock.timing, stats, tau, grid,
                       sources)
     d = replace(d, hbl=build_hbl(d))

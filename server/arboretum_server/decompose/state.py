@@ -49,7 +49,7 @@ class Decomposition:
     points: np.ndarray
     """(N, 3) float64: the downsampled points in the 0.8 m working frame."""
     labels: np.ndarray
-    """(N,) uint8: WOOD/LEAF per point."""
+    """(N,) uint8: WOOD/LEAF per point as reported (all WOOD when ``options.leaf_off``)."""
     root_index: int
     """Index of the root point."""
     pred: np.ndarray
