@@ -1,0 +1,143 @@
+"""Session 15 (helper-119): a rerouted secondary branch needs only the path to its own lobe, so its Dijkstra
+stops at the length of the shared routing's path re-priced on the reroute's graph
+(``graph.shortest_path_to``); where two neighbours give a node of that path the same distance, the full run
+decides. The path must be the full run's, node for node, and so must every decomposition."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.sparse import coo_matrix
+
+from arboretum_server.decompose import graph
+from arboretum_server.decompose.graph import (
+    path_cost,
+    path_is_unique,
+    path_to,
+    shortest_path_to,
+    shortest_paths,
+)
+
+
+def _tied_graph(rng: np.random.Generator, n: int):
+    """A connected symmetric graph on ``n`` nodes with weights 1, 2 or 3 (times 0.1 or 1): many exact ties."""
+    m = 3 * n
+    a, b = rng.integers(0, n, m), rng.integers(0, n, m)
+    a, b = a[a != b], b[a != b]
+    w = rng.integers(1, 4, len(a)) * (0.1 if rng.random() < 0.5 else 1.0)
+    chain = np.arange(n - 1)
+    a, b, w = np.r_[a, chain], np.r_[b, chain + 1], np.r_[w, np.full(n - 1, 2.0)]
+    adj = coo_matrix((np.r_[w, w], (np.r_[a, b], np.r_[b, a])), shape=(n, n)).tocsr()
+    adj.sum_duplicates()
+    return adj
+
+
+def test_bounded_path_equals_full_run_on_tied_graphs():
+    rng = np.random.default_rng(0)
+    checked = 0
+    for _ in range(200):
+        n = int(rng.integers(20, 300))
+        adj = _tied_graph(rng, n)
+        root = int(rng.integers(n))
+        _, pred = shortest_paths(adj, root)
+        for target in rng.integers(0, n, 4).tolist():
+            full = path_to(pred, target)
+            for known in (full, np.array([root, target])):  # a tight bound, and one too short (full run)
+                assert np.array_equal(path_to(shortest_path_to(adj, root, target, known), target), full)
+                checked += 1
+    assert checked == 1600
+
+
+def _square():
+    """Root 0 to target 3 two ways of the same length (0-1-3, 0-2-3), and a far node 4 behind the target."""
+    a, b, w = np.array([0, 0, 1, 2, 3]), np.array([1, 2, 3, 3, 4]), np.array([1.0, 1.0, 1.0, 1.0, 5.0])
+    return coo_matrix((np.r_[w, w], (np.r_[a, b], np.r_[b, a])), shape=(5, 5)).tocsr()
+
+
+def test_a_tie_on_the_path_falls_back_to_the_full_run(monkeypatch):
+    adj = _square()
+    limits = []
+    plain = graph.dijkstra
+
+    def spy(*a, **k):
+        limits.append(k.get("limit", np.inf))
+        return plain(*a, **k)
+
+    monkeypatch.setattr(graph, "dijkstra", spy)
+    dist, pred = shortest_paths(adj, 0)
+    assert not path_is_unique(adj, dist, path_to(pred, 3))  # nodes 1 and 2 both give node 3 its distance
+    limits.clear()
+    got = shortest_path_to(adj, 0, 3, path_to(pred, 3))
+    assert limits == [2.0, np.inf]  # bounded at the path's length 2, then the full run
+    assert np.array_equal(path_to(got, 3), path_to(pred, 3))
+    limits.clear()
+    got = shortest_path_to(adj, 0, 1, np.array([0, 1]))
+    assert limits == [1.0] and got.tolist()[:2] == [-1, 0]
+
+
+def test_path_cost_sums_from_the_root_and_bounds_the_distance():
+    adj = _square()
+    assert path_cost(adj, np.array([0, 1, 3, 4])) == 7.0
+    assert path_cost(adj, np.array([4])) == 0.0
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        adj = _tied_graph(rng, 100)
+        adj.data = adj.data * rng.uniform(0.5, 2.0, len(adj.data))  # asymmetric rounding, still >= Dijkstra
+        adj = (adj + adj.T).tocsr()
+        dist, pred = shortest_paths(adj, 0)
+        for t in range(100):
+            assert path_cost(adj, path_to(pred, t)) >= dist[t]
+
+
+def test_path_to_reads_an_array_like_a_list():
+    pred = np.array([-1, 0, 1, 1, 3], np.int32)
+    assert path_to(pred, 4).tolist() == path_to(pred.tolist(), 4).tolist() == [0, 1, 3, 4]
+    assert path_to(pred, 0).tolist() == [0]
+
+
+@pytest.fixture(scope="module")
+def pine_points():
+    from arboretum_server.decompose.report import CASES, grow_truth
+    from arboretum_server.decompose.toytree import toy_scan
+
+    truth = grow_truth("harmonic", "pine", 1)
+    pts, _ = toy_scan(truth, n=40000, noise=0.002 * float(np.ptp(truth.positions[:, 2])), seed=1,
+                      **CASES["leaf-on"])
+    return pts
+
+
+def _arrays(d):
+    hbl = d.hbl
+    out = [hbl.points, hbl.labels]
+    for b in hbl.branches:
+        out += [b.points, b.radii, np.array([b.parent, b.parent_vertex])]
+    for lb in hbl.lobes:
+        out += [lb.points, lb.hull_vertices, lb.hull_faces, lb.centre, np.array([lb.branch])]
+    return out
+
+
+def test_reroutes_are_bounded_and_change_nothing(pine_points, monkeypatch):
+    """The leaf-on pine reroutes 36 branches: each Dijkstra is bounded (finite limit, fewer points settled
+    than the 12,000 of a full run), and the decomposition equals the one with a full run per reroute."""
+    from arboretum_server.decompose import secondary
+    from arboretum_server.decompose.options import DecomposeOptions
+    from arboretum_server.decompose.pipeline import decompose
+
+    runs = []
+    plain = graph.dijkstra
+
+    def spy(adj, **k):
+        dist, pred = plain(adj, **k)
+        runs.append((k.get("limit", np.inf), int(np.isfinite(dist).sum()), adj.shape[0]))
+        return dist, pred
+
+    monkeypatch.setattr(graph, "dijkstra", spy)
+    bounded = decompose(pine_points, DecomposeOptions(species="pine"))
+    rerouted = bounded.stats["rerouted"]
+    reroutes = runs[2:]  # after the main branches' and the shared secondary routing's full runs
+    assert rerouted == 36 and len(reroutes) == rerouted
+    assert all(np.isfinite(limit) and settled < n for limit, settled, n in reroutes)
+    assert sum(s for _, s, _ in reroutes) < 0.7 * sum(n for _, _, n in reroutes)
+    monkeypatch.setattr(secondary, "shortest_path_to", lambda adj, root, target, known: shortest_paths(adj, root)[1])
+    full = decompose(pine_points, DecomposeOptions(species="pine"))
+    assert all(np.array_equal(a, b) for a, b in zip(_arrays(bounded), _arrays(full), strict=True))
