@@ -181,7 +181,8 @@ def decompose(points: np.ndarray, options: DecomposeOptions = DecomposeOptions()
     sources = zone_sources(pts, np.concatenate(groups))
     zone = zones(pts, groups, sources)
     clock.lap("lobes")
-    lobes, pred2, rerouted = make_lobes(groups, centres, pts, g.adjacency, root, zone, mains, grid, tau, o)
+    lobes, pred2, rerouted = make_lobes(groups, centres, pts, g.adjacency, root, zone, mains, grid, tau, o,
+                                        tree=tree)
     clock.lap("secondary")
     lobe_of = np.full(len(pts), -1, np.int32)
     lobe_of[fol] = k_lab
