@@ -16,23 +16,76 @@ would duplicate wood that is already there.
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 from scipy.spatial import cKDTree
 
 from arboretum_library.geometry import polyline_lengths
 
 from .grid import BoxGrid
+from .memo import ArrayMemo
 from .similarity import assignment_cost, resample_all, shape_contexts
 
 
 def resample_step(points: np.ndarray, step: float) -> np.ndarray:
-    """``points`` (N, 3) resampled at arc-length spacing ~``step`` (M >= 2 vertices, ends kept)."""
+    """``points`` (N, 3) resampled at arc-length spacing ~``step`` (M >= 2 vertices, ends kept).
+
+    A compiled loop (``_resample_kernel``) gives bit for bit what ``resample_step_reference`` does with
+    numpy (the tests hold the two together): a refinement resamples 200-300 short polylines, and numpy's
+    per-call overhead made that a tenth of its time (session 15)."""
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 2 or not (step > 0):
+        return resample_step_reference(points, step)
+    out = _resample_kernel(pts, float(step))
+    return out if len(out) else resample_step_reference(points, step)
+
+
+def resample_step_reference(points: np.ndarray, step: float) -> np.ndarray:
+    """``resample_step`` in numpy: arc lengths, ``np.linspace`` and ``np.interp`` per axis (the slow reference)."""
     s = polyline_lengths(points)
     n = max(2, int(np.ceil(s[-1] / step)) + 1)
     t = np.linspace(0.0, s[-1], n)
     return np.stack([np.interp(t, s, points[:, k]) for k in range(3)], axis=1)
+
+
+@njit(cache=True)
+def _resample_kernel(pts: np.ndarray, step: float) -> np.ndarray:  # pragma: no cover - numba
+    """``resample_step_reference`` for (N >= 2, 3) float64 ``pts``: the same float operations in the same
+    order (``np.linalg.norm`` of the differences, a running sum, ``np.linspace``'s i * (length / (n - 1))
+    with the end set to the length, and ``np.interp``'s interval search, slopes and exact hits)."""
+    m = pts.shape[0]
+    s = np.zeros(m)
+    s[0] = 0.0
+    acc = 0.0
+    for i in range(1, m):
+        dx, dy, dz = pts[i, 0] - pts[i - 1, 0], pts[i, 1] - pts[i - 1, 1], pts[i, 2] - pts[i - 1, 2]
+        acc += np.sqrt(dx * dx + dy * dy + dz * dz)
+        s[i] = acc
+    length = s[m - 1]
+    if not np.isfinite(length):
+        return np.zeros((0, 3))  # the reference's nan handling is not copied
+    n = max(2, int(np.ceil(length / step)) + 1)
+    delta = length / (n - 1)
+    out = np.zeros((n, 3))
+    j = 0
+    for i in range(n):
+        x = length if i == n - 1 else (i * delta if delta != 0.0 else (i / (n - 1)) * length)
+        while j + 1 < m and x >= s[j + 1]:  # x grows: the last j with s[j] <= x
+            j += 1
+        for k in range(3):
+            if j == m - 1 or s[j] == x:
+                out[i, k] = pts[j, k]
+            else:
+                slope = (pts[j + 1, k] - pts[j, k]) / (s[j + 1] - s[j])
+                out[i, k] = slope * (x - s[j]) + pts[j, k]
+                if np.isnan(out[i, k]):  # np.interp tries the other end, then a flat interval's value
+                    out[i, k] = slope * (x - s[j + 1]) + pts[j + 1, k]
+                    if np.isnan(out[i, k]) and pts[j, k] == pts[j + 1, k]:
+                        out[i, k] = pts[j, k]
+    return out
 
 
 def sample_polylines(polylines: list[np.ndarray], step: float) -> np.ndarray:
@@ -57,13 +110,28 @@ def centre_paths(paths: list[np.ndarray], grid: BoxGrid) -> list[np.ndarray]:
     return pieces
 
 
-def merged_prefix(cands: list[np.ndarray], ref: np.ndarray, tau: float) -> np.ndarray:
-    """For each candidate polyline, the index of its first vertex farther than ``tau`` from ``ref``."""
-    tree = cKDTree(ref)
+def merged_prefix(cands: list[np.ndarray], ref: np.ndarray, tau: float, tree: cKDTree | None = None) -> np.ndarray:
+    """For each candidate polyline, the index of its first vertex farther than ``tau`` from ``ref``
+    (``tree``: a KD-tree of ``ref``, when known)."""
+    tree = tree if tree is not None else cKDTree(ref)
     lens = np.array([len(c) for c in cands])
     d, _ = tree.query(np.concatenate(cands))
     far = np.split(d >= tau, np.cumsum(lens)[:-1])
     return np.array([int(np.argmax(f)) if f.any() else len(f) for f in far])
+
+
+def merged_prefixes(cands: list[np.ndarray], trees: list[cKDTree], tau: float) -> np.ndarray:
+    """(P, M) int: ``merged_prefix`` of the P candidate polylines (each >= 1 vertex) against each of M
+    references given by their KD-trees (the candidates joined once, not once per reference)."""
+    lens = np.array([len(c) for c in cands])
+    q = np.concatenate(cands)
+    starts = np.r_[0, np.cumsum(lens)[:-1]]
+    local = np.arange(len(q)) - np.repeat(starts, lens)
+    out = np.zeros((len(cands), len(trees)), np.int64)
+    for m, tree in enumerate(trees):
+        far = tree.query(q)[0] >= tau
+        out[:, m] = np.minimum.reduceat(np.where(far, local, np.repeat(lens, lens)), starts)
+    return out
 
 
 WANDER = 1.3
@@ -214,11 +282,26 @@ def merge_mains(paths: list[np.ndarray], order: list[int], tau: float, n: int,
     return kept
 
 
+_REFERENCES = ArrayMemo()
+"""``main_references``' shape contexts and KD-trees by the first reference path's array, while it lives,
+with weak references to the other paths they were computed for: every refinement of a decomposition
+routes against the same main branches (a BranchSet's arrays are replaced, never changed in place)."""
+
+
 def main_references(mains: BranchSet, n: int, bins: tuple[int, int, int]) -> tuple[list, np.ndarray, list]:
     """What ``merge_secondaries`` compares every path with: the main branches' reference paths, their
-    shape contexts and KD-trees (computed once for many calls on the same main branches)."""
+    shape contexts and KD-trees; computed once per set of main branches (``_REFERENCES``): before session
+    15 every ``make_lobes`` call of every refinement (one to three each) computed them again."""
     refs = [mains.reference(b) for b in range(len(mains.full))]
-    return refs, _hists(refs, n, bins), [cKDTree(f) for f in refs]
+    if not refs:
+        return refs, _hists(refs, n, bins), []
+    key = (n, tuple(bins), len(refs))
+    hit = _REFERENCES.get(refs[0])
+    if hit is None or hit[0] != key or any(w() is not a for w, a in zip(hit[1], refs)):
+        # the trees hold copies: a tree holding refs[0] itself would keep its own entry alive
+        hit = _REFERENCES.put(refs[0], (key, [weakref.ref(a) for a in refs], _hists(refs, n, bins),
+                                        [cKDTree(f.copy()) for f in refs]))
+    return refs, hit[2], hit[3]
 
 
 def merge_secondaries(paths: list[np.ndarray], mains: BranchSet, tau: float, n: int,
@@ -228,7 +311,7 @@ def merge_secondaries(paths: list[np.ndarray], mains: BranchSet, tau: float, n: 
     if not paths:
         return []
     refs, hm, trees = references if references is not None else main_references(mains, n, bins)
-    ks = np.stack([merged_prefix(paths, f, tau) for f in refs], axis=1)  # (P, M)
+    ks = merged_prefixes(paths, trees, tau)  # (P, M)
     hp = _hists(paths, n, bins)
     out = []
     for p, path in enumerate(paths):

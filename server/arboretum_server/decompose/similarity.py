@@ -12,6 +12,7 @@ branch pairs at once.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from scipy.optimize import linear_sum_assignment
 
 from arboretum_library.geometry import resample_polyline
@@ -35,20 +36,77 @@ def shape_contexts(branches: np.ndarray, bins: tuple[int, int, int] = (5, 6, 4))
     el = np.arcsin(np.clip(v[..., 2] / np.maximum(r, 1e-12), -1.0, 1.0))
     ei = np.clip(((el + np.pi / 2) / np.pi * ne).astype(int), 0, ne - 1)
     flat = (ri * na + ai) * ne + ei
-    hist = np.zeros((b, n, nr * na * ne))
+    k = nr * na * ne
     bi, ii, _ = np.nonzero(np.broadcast_to(off, (b, n, n)))
-    np.add.at(hist, (bi, ii, flat[off.repeat(b, axis=0)]), 1.0)
-    return hist / (n - 1)
+    # whole counts, so the same floats as adding 1.0 per vector (np.add.at, before session 15), 5x faster
+    hist = np.bincount((bi * n + ii) * k + flat[off.repeat(b, axis=0)], minlength=b * n * k).astype(np.float64)
+    return hist.reshape(b, n, k) / (n - 1)
+
+
+PAIRWISE_BLOCK = 128
+"""numpy sums a float64 block of up to this many in eight running sums (``pairwise_sum`` in its
+loops_utils.h), larger ones by halves; ``chi_square`` compiles the first case only."""
 
 
 def chi_square(h1: np.ndarray, h2: np.ndarray) -> np.ndarray:
-    """Chi-square cost matrix (n1, n2) between normalised histograms h1 (n1, k) and h2 (n2, k).
+    """Chi-square cost matrix (n1, n2) between normalised histograms h1 (n1, k) and h2 (n2, k) (>= 0).
 
     With both histograms summing to 1, 0.5 sum (a - b)^2 / (a + b) = 1 - 2 sum ab / (a + b).
+    For k <= ``PAIRWISE_BLOCK`` (the default bins give 120) a compiled loop computes only the terms where
+    both bins are filled (a shape context fills at most n - 1 of its k bins) and sums them in numpy's
+    order, bit for bit what ``chi_square_reference`` gives (the tests hold the two together): 0.007 ms a
+    pair of 24-vertex branches against numpy's 0.13 ms, about 100 pairs an "around" insert (session 15).
     """
+    h1 = np.ascontiguousarray(h1, dtype=np.float64)
+    h2 = np.ascontiguousarray(h2, dtype=np.float64)
+    if h1.shape[1] > PAIRWISE_BLOCK:
+        return chi_square_reference(h1, h2)
+    out = np.zeros((len(h1), len(h2)))
+    _chi_square_kernel(h1, h2, out)
+    return out
+
+
+def chi_square_reference(h1: np.ndarray, h2: np.ndarray) -> np.ndarray:
+    """``chi_square`` in numpy, over every bin (the slow reference)."""
     a, b = h1[:, None, :], h2[None, :, :]
     s = a + b
     return 1.0 - 2.0 * (a * b / (s + (s == 0))).sum(axis=2)
+
+
+@njit(cache=True)
+def _chi_square_kernel(h1: np.ndarray, h2: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - numba
+    """``chi_square_reference`` for k <= ``PAIRWISE_BLOCK`` bins. numpy sums the k terms of a pair in eight
+    running sums (term c into sum c % 8, in order of c; for k < 8 one sum), combines them as ((0 + 1) +
+    (2 + 3)) + ((4 + 5) + (6 + 7)) and adds the last k % 8 terms one by one. A term is 0.0 exactly unless
+    both bins are filled, and adding 0.0 changes no sum (every term is >= 0), so only the filled bins of
+    ``h1``'s row are visited, into the same running sums in the same order."""
+    k = h1.shape[1]
+    block = k - k % 8 if k >= 8 else 0
+    filled = np.zeros(k, np.int64)
+    acc = np.zeros(8)
+    for i in range(h1.shape[0]):
+        m = 0
+        for c in range(k):
+            if h1[i, c] != 0.0:
+                filled[m] = c
+                m += 1
+        for j in range(h2.shape[0]):
+            acc[:] = 0.0
+            q = 0
+            while q < m and filled[q] < block:
+                c = filled[q]
+                a, b = h1[i, c], h2[j, c]
+                if b != 0.0:
+                    acc[c % 8] += a * b / (a + b)
+                q += 1
+            res = ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]))
+            while q < m:
+                c = filled[q]
+                a, b = h1[i, c], h2[j, c]
+                if b != 0.0:
+                    res += a * b / (a + b)
+                q += 1
+            out[i, j] = 1.0 - 2.0 * res
 
 
 def assignment_cost(h1: np.ndarray, h2: np.ndarray) -> float:
