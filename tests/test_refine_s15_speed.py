@@ -142,19 +142,19 @@ def test_resample_step_matches_numpy_interp(rng):
 
 
 def test_tetrahedra_kernels_match_their_references(rng):
-    from arboretum_server.decompose import lobes
+    from arboretum_server.decompose import lobes, tetloops
 
     for n in (5, 40, 300):
         pts = rng.random((n, 3))
         pts[: n // 5, 2] = 0.5  # a flat patch: degenerate tetrahedra
         tet = lobes.Tetrahedra(pts)
         p = tet.points[tet.tets]
-        fast, slow = lobes._circumspheres(p), lobes.circumspheres_reference(p)
+        fast, slow = lobes._circumspheres(p), tetloops.circumspheres_reference(p)
         assert np.array_equal(fast[0], slow[0], equal_nan=True) and np.array_equal(fast[1], slow[1])
         for radius in (0.05, 0.15, 0.5):
             keep = tet.radii < radius
             faces, opp = lobes._boundary(tet.tets, tet.neighbours, keep)
-            ref_faces, ref_opp = lobes.boundary_reference(tet.tets, tet.neighbours, keep)
+            ref_faces, ref_opp = tetloops.boundary_reference(tet.tets, tet.neighbours, keep)
             assert faces.dtype == ref_faces.dtype and np.array_equal(faces, ref_faces)
             assert np.array_equal(opp, ref_opp)
             shape = tet.shape(radius)
@@ -162,7 +162,7 @@ def test_tetrahedra_kernels_match_their_references(rng):
                 continue
             for f in (shape[1], shape[1][1:], np.vstack([shape[1], shape[1][:4] + len(shape[0])])):
                 for one in (True, False):
-                    assert lobes.is_closed_manifold(f, one) == lobes.is_closed_manifold_reference(f, one)
+                    assert lobes.is_closed_manifold(f, one) == tetloops.is_closed_manifold_reference(f, one)
 
 
 def test_carving_tests_only_the_spheres_its_radii_can_keep(rng):
@@ -183,7 +183,7 @@ def test_carving_answers_as_the_kd_tree_query_did(rng):
     circumspheres (a tetrahedron's own vertices) are the cases ``_held`` leaves to that query."""
     from scipy.spatial import cKDTree
 
-    from arboretum_server.decompose.lobes import Tetrahedra, _held
+    from arboretum_server.decompose.lobes import Tetrahedra, _held  # tetloops.held
 
     for n, m in ((300, 40), (60, 1), (500, 400)):
         tet = Tetrahedra(rng.random((n, 3)))
@@ -213,7 +213,16 @@ def _arrays(d):
 
 
 def test_refinements_with_the_slow_references_give_the_same_lobes(toy, monkeypatch):
-    from arboretum_server.decompose import carve, clear, lobes, merge, refine, secondary, similarity
+    from arboretum_server.decompose import (
+        carve,
+        clear,
+        lobes,
+        merge,
+        refine,
+        secondary,
+        similarity,
+        tetloops,
+    )
     from arboretum_server.decompose.memo import ArrayMemo
 
     fast = [_arrays(op()) for op in _refinements(toy)]
@@ -227,9 +236,9 @@ def test_refinements_with_the_slow_references_give_the_same_lobes(toy, monkeypat
             monkeypatch.setattr(mod, "resample_step", merge.resample_step_reference)
     monkeypatch.setattr(secondary, "main_references", uncached)
     monkeypatch.setattr(similarity, "chi_square", similarity.chi_square_reference)
-    monkeypatch.setattr(lobes, "_circumspheres", lobes.circumspheres_reference)
-    monkeypatch.setattr(lobes, "_boundary", lobes.boundary_reference)
-    monkeypatch.setattr(lobes, "is_closed_manifold", lobes.is_closed_manifold_reference)
+    monkeypatch.setattr(lobes, "_circumspheres", tetloops.circumspheres_reference)
+    monkeypatch.setattr(lobes, "_boundary", tetloops.boundary_reference)
+    monkeypatch.setattr(lobes, "is_closed_manifold", tetloops.is_closed_manifold_reference)
     monkeypatch.setattr(carve, "_CARVED", ArrayMemo())  # no carved shape recalled from the fast run
     monkeypatch.setattr(carve, "_PLAIN", ArrayMemo())
     slow = [_arrays(op()) for op in _refinements(toy)]

@@ -1,0 +1,243 @@
+"""Compiled loops of the alpha shapes (lobes.py), each bit for bit the numpy reference kept beside it
+(``*_reference``; tests/test_refine_s15_speed.py holds each pair together): circumspheres of tetrahedra,
+which circumspheres hold a blocker point (the carving of ``Tetrahedra.without``), the boundary faces of
+kept tetrahedra, and the closed-manifold test. Session 15: numpy's temporaries and scipy's sparse-graph
+set-up took most of a refinement's hull time (an "around" insert on the pine: 116-122 -> 83-87 ms with
+the rest of that change).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+def circumspheres(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Circumcentres (T, 3) and circumradii (T,) of tetrahedra ``p`` (T, 4, 3); inf radius (and nan
+    centre) for flat ones.
+
+    Closed form: with a, b, c the edges from vertex 0, the circumcentre offset is
+    (|a|^2 (b x c) + |b|^2 (c x a) + |c|^2 (a x b)) / (2 a . (b x c)).
+    A compiled loop, bit for bit ``circumspheres_reference`` (the tests hold the two together): numpy's
+    temporaries took a fifth of a tetrahedralisation's time (session 15).
+    """
+    p = np.ascontiguousarray(p, dtype=np.float64)
+    r = np.full(len(p), np.inf)
+    centre = np.full((len(p), 3), np.nan)
+    _circumspheres_kernel(p, centre, r)
+    return centre, r
+
+
+def circumspheres_reference(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``circumspheres`` in numpy (the slow reference)."""
+    a, b, c = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]
+    bc, ca, ab = np.cross(b, c), np.cross(c, a), np.cross(a, b)
+    det = 2.0 * (a * bc).sum(axis=1)
+    num = (a * a).sum(1)[:, None] * bc + (b * b).sum(1)[:, None] * ca + (c * c).sum(1)[:, None] * ab
+    ok = np.abs(det) > 1e-18
+    r = np.full(len(p), np.inf)
+    centre = np.full((len(p), 3), np.nan)
+    r[ok] = np.linalg.norm(num[ok], axis=1) / np.abs(det[ok])
+    centre[ok] = p[ok, 0] + num[ok] / det[ok, None]
+    return centre, r
+
+
+@njit(cache=True)
+def _circumspheres_kernel(p: np.ndarray, centre: np.ndarray, r: np.ndarray) -> None:  # pragma: no cover - numba
+    """``circumspheres_reference`` tetrahedron by tetrahedron: the same float operations in the same order
+    (``np.cross``'s products then difference, sums over three axes left to right)."""
+    for t in range(p.shape[0]):
+        a0, a1, a2 = p[t, 1, 0] - p[t, 0, 0], p[t, 1, 1] - p[t, 0, 1], p[t, 1, 2] - p[t, 0, 2]
+        b0, b1, b2 = p[t, 2, 0] - p[t, 0, 0], p[t, 2, 1] - p[t, 0, 1], p[t, 2, 2] - p[t, 0, 2]
+        c0, c1, c2 = p[t, 3, 0] - p[t, 0, 0], p[t, 3, 1] - p[t, 0, 1], p[t, 3, 2] - p[t, 0, 2]
+        bc0, bc1, bc2 = b1 * c2 - b2 * c1, b2 * c0 - b0 * c2, b0 * c1 - b1 * c0
+        ca0, ca1, ca2 = c1 * a2 - c2 * a1, c2 * a0 - c0 * a2, c0 * a1 - c1 * a0
+        ab0, ab1, ab2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+        det = 2.0 * (a0 * bc0 + a1 * bc1 + a2 * bc2)
+        if not abs(det) > 1e-18:
+            continue
+        la, lb, lc = a0 * a0 + a1 * a1 + a2 * a2, b0 * b0 + b1 * b1 + b2 * b2, c0 * c0 + c1 * c1 + c2 * c2
+        n0 = la * bc0 + lb * ca0 + lc * ab0
+        n1 = la * bc1 + lb * ca1 + lc * ab1
+        n2 = la * bc2 + lb * ca2 + lc * ab2
+        r[t] = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2) / abs(det)
+        centre[t, 0] = p[t, 0, 0] + n0 / det
+        centre[t, 1] = p[t, 0, 1] + n1 / det
+        centre[t, 2] = p[t, 0, 2] + n2 / det
+
+
+
+HELD_CELLS = 12
+"""``held`` buckets the blockers in a grid of at most this many cells along their box's longest side."""
+HELD_MARGIN = 1e-9
+"""Relative margin on squared distances within which ``held`` leaves the call to the KD-tree."""
+
+
+def held(centres: np.ndarray, radii: np.ndarray, blockers: np.ndarray) -> np.ndarray:
+    """(T,) int8 per sphere (``centres`` (T, 3), ``radii`` (T,)): 1 if it holds one of the ``blockers`` (B, 3),
+    0 if not, 2 when a blocker lies within ``HELD_MARGIN`` of its surface (decided by the KD-tree query
+    ``Tetrahedra.without`` made for every sphere before session 15: 2-3 times slower). Clear answers only
+    (a squared distance off r^2 by a billionth cannot round across), so every answer is the KD-tree's."""
+    out = np.zeros(len(centres), np.int8)
+    if not len(centres) or not len(blockers):
+        return out
+    lo = blockers.min(axis=0)
+    size = max(float((blockers.max(axis=0) - lo).max()) / HELD_CELLS, 1e-9)
+    dims = ((blockers.max(axis=0) - lo) / size).astype(np.int64) + 1
+    cell = np.minimum(((blockers - lo) / size).astype(np.int64), dims - 1)
+    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
+    order = np.argsort(key, kind="stable")
+    first = np.r_[0, np.cumsum(np.bincount(key, minlength=int(np.prod(dims))))].astype(np.int64)
+    _held_kernel(np.ascontiguousarray(centres), np.ascontiguousarray(radii), blockers[order], lo, size, dims,
+                 first, HELD_MARGIN, out)
+    return out
+
+
+@njit(cache=True)
+def _held_kernel(centres, radii, blockers, lo, size, dims, first, margin, out):  # pragma: no cover - numba
+    span = np.zeros((3, 2), np.int64)
+    for t in range(centres.shape[0]):
+        r = radii[t]
+        reach = r * (1.0 + 1e-6) + 1e-12  # a blocker within r (and the margin) lies in this box
+        empty = False
+        for k in range(3):
+            a = (centres[t, k] - reach - lo[k]) / size
+            b = (centres[t, k] + reach - lo[k]) / size
+            if b < 0.0 or a >= dims[k]:
+                empty = True
+                break
+            span[k, 0] = max(int(np.floor(a)), 0)
+            span[k, 1] = min(int(np.floor(b)), dims[k] - 1)
+        if empty:
+            continue
+        inner, outer = r * r * (1.0 - margin), r * r * (1.0 + margin)
+        status = 0
+        for ix in range(span[0, 0], span[0, 1] + 1):
+            for iy in range(span[1, 0], span[1, 1] + 1):
+                for iz in range(span[2, 0], span[2, 1] + 1):
+                    c = (ix * dims[1] + iy) * dims[2] + iz
+                    for i in range(first[c], first[c + 1]):
+                        dx = blockers[i, 0] - centres[t, 0]
+                        dy = blockers[i, 1] - centres[t, 1]
+                        dz = blockers[i, 2] - centres[t, 2]
+                        d2 = dx * dx + dy * dy + dz * dz
+                        if d2 < inner:
+                            status = 1
+                            break
+                        if d2 <= outer:
+                            status = 2
+                    if status == 1:
+                        break
+                if status == 1:
+                    break
+            if status == 1:
+                break
+        out[t] = status
+
+
+
+def boundary(tets: np.ndarray, neighbours: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Faces (F, 3) of the kept ``tets`` (T, 4) whose neighbour across them (``neighbours`` (T, 4), the
+    tetrahedron opposite each vertex, -1 for none) is not kept, and the vertex opposite each (F,).
+    Face k of a tetrahedron is the one opposite its vertex k; faces come grouped by k, in tetrahedron order.
+    A compiled loop (session 15), the same arrays as ``boundary_reference``."""
+    tets = np.ascontiguousarray(tets)
+    return _boundary_kernel(tets, np.ascontiguousarray(neighbours), np.ascontiguousarray(keep, dtype=np.bool_))
+
+
+def boundary_reference(tets: np.ndarray, neighbours: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``boundary`` in numpy (the slow reference)."""
+    out, opp = [], []
+    for k, cols in enumerate(_FACE_COLUMNS):
+        nb = neighbours[:, k]
+        bnd = keep & ((nb < 0) | ~keep[nb])
+        out.append(tets[bnd][:, list(cols)])
+        opp.append(tets[bnd, k])
+    return np.concatenate(out), np.concatenate(opp)
+
+
+_FACE_COLUMNS = ((1, 2, 3), (0, 3, 2), (0, 1, 3), (0, 2, 1))
+"""The vertices of the face opposite vertex k of a tetrahedron, in the order ``boundary`` gives them."""
+
+
+@njit(cache=True)
+def _boundary_kernel(tets, neighbours, keep):  # pragma: no cover - numba
+    cols = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+    count = 0
+    for k in range(4):
+        for t in range(tets.shape[0]):
+            nb = neighbours[t, k]
+            count += keep[t] and (nb < 0 or not keep[nb])
+    faces = np.zeros((count, 3), tets.dtype)
+    opp = np.zeros(count, tets.dtype)
+    i = 0
+    for k in range(4):
+        for t in range(tets.shape[0]):
+            nb = neighbours[t, k]
+            if keep[t] and (nb < 0 or not keep[nb]):
+                for c in range(3):
+                    faces[i, c] = tets[t, cols[k, c]]
+                opp[i] = tets[t, k]
+                i += 1
+    return faces, opp
+
+
+
+def is_closed_manifold(faces: np.ndarray, one_piece: bool = True) -> bool:
+    """True when every edge of ``faces`` (F, 3) borders exactly two triangles and (``one_piece``) they form
+    one piece (every vertex index up to the largest used is joined to the rest). A compiled loop (sorted
+    edge keys, then union-find): the same answer as ``is_closed_manifold_reference`` (the tests hold the
+    two together), without scipy's sparse-graph set-up, which took most of its time (session 15)."""
+    faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+    if len(faces) < 4:
+        return False
+    return bool(_closed_kernel(faces, int(faces.max()) + 1, one_piece))
+
+
+def is_closed_manifold_reference(faces: np.ndarray, one_piece: bool = True) -> bool:
+    """``is_closed_manifold`` with ``np.unique`` and scipy's connected components (the slow reference)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    if len(faces) < 4:
+        return False
+    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1).astype(np.int64)
+    _, counts = np.unique(e[:, 0] * (int(faces.max()) + 1) + e[:, 1], return_counts=True)
+    if (counts != 2).any():
+        return False
+    if not one_piece:
+        return True
+    n = int(faces.max()) + 1
+    graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    return connected_components(graph, directed=False)[0] == 1
+
+
+@njit(cache=True)
+def _closed_kernel(faces: np.ndarray, n: int, one_piece: bool) -> bool:  # pragma: no cover - numba
+    keys = np.zeros(3 * faces.shape[0], np.int64)
+    for t in range(faces.shape[0]):
+        for k in range(3):
+            u, v = faces[t, k], faces[t, (k + 1) % 3]
+            keys[3 * t + k] = min(u, v) * n + max(u, v)
+    keys.sort()
+    i = 0
+    while i < len(keys):  # every key exactly twice
+        if i + 1 >= len(keys) or keys[i + 1] != keys[i] or (i + 2 < len(keys) and keys[i + 2] == keys[i]):
+            return False
+        i += 2
+    if not one_piece:
+        return True
+    root = np.arange(n)
+    pieces = n
+    for i in range(0, len(keys), 2):
+        u, v = keys[i] // n, keys[i] % n
+        while root[u] != u:
+            root[u] = root[root[u]]
+            u = root[u]
+        while root[v] != v:
+            root[v] = root[root[v]]
+            v = root[v]
+        if u != v:
+            root[u] = v
+            pieces -= 1
+    return pieces == 1
