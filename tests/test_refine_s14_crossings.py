@@ -2,7 +2,7 @@
 the pines that left a secondary branch through a lobe it does not feed. Far merges: the merged lobe wraps
 the trunk, no one-piece carving of it clears the kept branches it swallows, and their routes start on the
 trunk inside it (now: ``_give_way`` may carve it into several closed pieces; a merged centre enclosed by
-the lobes round the trunk moves to one of its own points, ``refine._moved_centre``). "Around" inserts:
+the lobes round the trunk moves to one of its own points, ``tunnel.moved_centre``). "Around" inserts:
 the lobe's 4-point remnant lies behind the inserted lobe, whose re-carving round the remnant's route
 swallowed another new branch (now: carved again with every other branch as a blocker too)."""
 

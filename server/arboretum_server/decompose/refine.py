@@ -7,8 +7,8 @@ must start is carved, ``carve.unwrap``), then the radii and records. A lobe that
 through a new lobe is carved out of it (``_give_way``, in several closed pieces if need be), or, when
 that fails, routed again with them. A new lobe's branch that no repair clears (it lies behind another new
 lobe: the outer part of a lobe, inserted or split off) is routed round the kept lobes alone, and the new
-lobes in its way are carved out of it (``_behind_new``); failing that, its centre moves to one of its own
-points that a straight branch reaches clear (``_moved_centre``).
+lobes in its way are carved out of it (``_behind_new``, ``tunnel.behind``); failing that, its centre moves to one of its own
+points that a straight branch reaches clear (``tunnel.moved_centre``).
 Lobes keep their order; new ones come last (a lobe that loses all its points is dropped). Point indices
 refer to ``Decomposition.points``; strokes are in the HBL's output frame.
 """
@@ -24,11 +24,11 @@ import numpy as np
 from arboretum_library.errors import InputError
 
 from .carve import carve_lobe
-from .clear import bent_fallback, boxes, foreign, inside_foreign, straight_fallback
-from .lobes import inside
-from .merge import resample_step, sample_polylines
+from .clear import boxes, foreign
+from .merge import sample_polylines
 from .secondary import make_lobes, zone_sources, zones
 from .state import Decomposition, LobeState, build_hbl
+from .tunnel import behind, enters
 
 ROUTE_ROUNDS = 3
 """Routing rounds of a refinement (``make_lobes`` calls): kept lobes whose branches run through the new
@@ -145,99 +145,14 @@ def _give_way(lobes: list[LobeState], n_kept: int, cross: list[int], pts: np.nda
     leaving the trunk there out (helper-115's sweep: 8 far merges left 1-9 crossings routing them again)."""
     wood = sample_polylines([lobes[i].segment for i in cross], step)
     for k in range(n_kept, len(lobes)):
-        if _enters(lobes[k], wood):  # the other new branches stay blockers: keep _behind_new's tunnels open
+        if enters(lobes[k], wood):  # the other new branches stay blockers: keep _behind_new's tunnels open
             rest = sample_polylines([lobes[i].segment for i in range(n_kept, len(lobes)) if i != k], step)
             carve_lobe(lobes, k, pts, np.concatenate([wood, rest]), radius, pieces=True)
 
 
-def _enters(lb: LobeState, wood: np.ndarray) -> bool:
-    """True if one of the points ``wood`` (W, 3) lies inside lobe ``lb``'s hull."""
-    lo, hi = lb.hull_vertices.min(axis=0), lb.hull_vertices.max(axis=0)
-    near = wood[((wood > lo) & (wood < hi)).all(axis=1)]
-    return bool(len(near) and inside(lb.hull_vertices, lb.hull_faces, near).any())
-
-
-def _behind_new(lobes: list[LobeState], n_kept: int, d: Decomposition, step: float = 0.0025) -> None:
-    """A new lobe (index >= ``n_kept``) whose own branch still crosses a lobe (no repair of ``make_lobes``
-    cleared it) gets the straight or bent repair among the kept lobes alone, and the other new lobes in
-    its way are carved out of it, when that clears it (in place; else its centre moves, ``_moved_centre``).
-
-    Such a lobe lies behind another new one: the outer part of a lobe that was inserted or split off,
-    with the part left between it and the main branches, so every route to it runs through that part.
-    The new lobes are rebuilt by this operation anyway. A re-carved hull keeps out of the new blockers
-    only and may fill a tunnel cut before for another branch: ``_entered`` refuses such a result, and the
-    carving is tried again with every other branch as a blocker too (``_give_way`` likewise keeps the
-    other new branches as blockers when it carves a new lobe again).
-    """
-    tol = d.options.step / 2
-    for j in range(n_kept, len(lobes)):
-        if not foreign(lobes, j, lobes[j].segment, tol, boxes(lobes)):
-            continue
-        sub = [*lobes[:n_kept], lobes[j]]
-        route = straight_fallback(sub, n_kept, d.mains) or bent_fallback(sub, n_kept, d.mains, d.points)
-        if route is None or not _carve_route(lobes, n_kept, j, route, d, step):
-            _moved_centre(lobes, j, d)
-
-
-def _carve_route(lobes: list[LobeState], n_kept: int, j: int, route: tuple[np.ndarray, int, int],
-                 d: Decomposition, step: float) -> bool:
-    """Give new lobe ``j`` the branch ``route`` (segment, parent, vertex), carving it out of the other new
-    lobes it enters, with the route alone as blocker, else with every other branch too; True (and
-    ``lobes`` updated) when the route is then clear and no branch enters a re-carved hull it stayed out of."""
-    tol = d.options.step / 2
-    wood = sample_polylines([route[0]], step)
-    enters = [k for k in range(n_kept, len(lobes)) if k != j and _enters(lobes[k], wood)]
-    for with_others in (False, True):
-        trial = list(lobes)
-        carved = []
-        for k in enters:
-            others = [lb.segment for i, lb in enumerate(lobes) if i not in (j, k)] if with_others else []
-            blockers = np.concatenate([wood, sample_polylines(others, step)]) if others else wood
-            if carve_lobe(trial, k, d.points, blockers, d.options.alpha_radius):
-                carved.append(k)
-        trial[j] = replace(trial[j], segment=route[0], parent=route[1], parent_vertex=route[2])
-        if not foreign(trial, j, route[0], tol, boxes(trial)) and not _entered(lobes, trial, carved, tol):
-            lobes[:] = trial
-            return True
-        if not carved:
-            break  # no carving succeeded with the route alone: not retried with more blockers (not measured)
-    return False
-
-
-def _moved_centre(lobes: list[LobeState], j: int, d: Decomposition, tries: int = 32) -> None:
-    """Lobe ``j``'s centre moved to one of its own points outside every other lobe that a straight branch
-    reaches clear (every (n // ``tries``)-th of its n points by distance from the old centre, nearest
-    first), with that branch (in place; nothing changes when none does). The last resort for a lobe
-    whose centre lies in a pocket every route to which runs through other lobes: a lobe merged from two
-    clusters either side of the trunk has its mean near the trunk, among the lobes round it
-    (``part_overlaps`` moves a centre the same way when it lies inside another lobe)."""
-    own = d.points[lobes[j].members]
-    own = own[np.argsort(np.linalg.norm(own - lobes[j].centre, axis=1), kind="stable")]
-    own = own[:: max(1, len(own) // tries)]
-    for c in own[~inside_foreign(lobes, j, own)]:
-        trial = list(lobes)
-        trial[j] = replace(lobes[j], centre=c)
-        route = straight_fallback(trial, j, d.mains)
-        if route is not None:
-            lobes[j] = replace(trial[j], segment=route[0], parent=route[1], parent_vertex=route[2])
-            return
-
-
-def _entered(before: list[LobeState], after: list[LobeState], changed: list[int], tol: float) -> bool:
-    """True if a branch (sampled every ``tol``) enters one of the ``changed`` lobes' hulls in ``after``
-    where it stayed out of that lobe in ``before``: a hull carved again from its points keeps out of
-    the new blockers only, and may fill a tunnel cut before for another branch."""
-    segs = [resample_step(lb.segment, tol) for lb in after]
-    which = np.concatenate([np.full(len(s), i) for i, s in enumerate(segs)])
-    q = np.concatenate(segs)
-    for k in changed:
-        near = ((q > after[k].hull_vertices.min(axis=0)) & (q < after[k].hull_vertices.max(axis=0))).all(axis=1)
-        near &= which != k
-        now = set(which[near][inside(after[k].hull_vertices, after[k].hull_faces, q[near])])
-        was = set(which[near][inside(before[k].hull_vertices, before[k].hull_faces, q[near])])
-        if now - was:
-            return True
-    return False
+def _behind_new(lobes: list[LobeState], n_kept: int, d: Decomposition) -> None:
+    """``tunnel.behind`` for the new lobes (indices >= ``n_kept``) of a refinement of ``d``."""
+    behind(lobes, n_kept, d.points, d.mains, d.options)
 
 
 def _crossing_new(lobes: list[LobeState], n_kept: int, tol: float) -> set[int]:

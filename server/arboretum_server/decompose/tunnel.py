@@ -1,0 +1,116 @@
+"""Last resorts for a lobe whose secondary branch still crosses another lobe after every repair of
+``secondary.make_lobes`` (ours; VRTree has no such guarantee): a straight or bent branch carved through
+the lobes in its way (``behind``, ``carve_route``), else the lobe's centre moved to one of its own points
+that a straight branch reaches clear (``moved_centre``). Refinement runs them on the lobes it makes
+(``refine._behind_new``), the decomposition on all of its lobes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from .carve import carve_lobe
+from .clear import bent_fallback, boxes, foreign, inside_foreign, straight_fallback
+from .lobes import inside
+from .merge import BranchSet, resample_step, sample_polylines
+from .options import DecomposeOptions
+from .state import LobeState
+
+
+def enters(lb: LobeState, wood: np.ndarray) -> bool:
+    """True if one of the points ``wood`` (W, 3) lies inside lobe ``lb``'s hull."""
+    lo, hi = lb.hull_vertices.min(axis=0), lb.hull_vertices.max(axis=0)
+    near = wood[((wood > lo) & (wood < hi)).all(axis=1)]
+    return bool(len(near) and inside(lb.hull_vertices, lb.hull_faces, near).any())
+
+
+def behind(lobes: list[LobeState], n_kept: int, pts: np.ndarray, mains: BranchSet, o: DecomposeOptions,
+           step: float = 0.0025) -> int:
+    """A new lobe (index >= ``n_kept``) whose own branch still crosses a lobe (no repair of ``make_lobes``
+    cleared it) gets the straight or bent repair among the kept lobes alone, and the other new lobes in
+    its way are carved out of it, when that clears it (in place; else its centre moves, ``moved_centre``).
+    Returns how many lobes it was asked to clear.
+
+    In a refinement such a lobe lies behind another new one: the outer part of a lobe that was inserted or
+    split off, with the part left between it and the main branches, so every route to it runs through that
+    part. A decomposition (``n_kept`` 0: every lobe is new) has one where the lobes packed round a
+    conifer's leader leave no clear way to a lobe at its top (session 15: one of 180 fresh synthetic
+    runs, the virtual scanner's pine seed 13 leaf-on, whose branch ran 0.56 of the height up the crown
+    through 8 lobes). A re-carved hull keeps out of the new blockers only and may fill a tunnel cut
+    before for another branch: ``entered`` refuses such a result, and the carving is tried again with
+    every other branch as a blocker too (refinement's ``_give_way`` likewise keeps the other new branches
+    as blockers when it carves a new lobe again).
+    """
+    tol, asked = o.step / 2, 0
+    for j in range(n_kept, len(lobes)):
+        if not foreign(lobes, j, lobes[j].segment, tol, boxes(lobes)):
+            continue
+        asked += 1
+        sub = [*lobes[:n_kept], lobes[j]]
+        route = straight_fallback(sub, n_kept, mains) or bent_fallback(sub, n_kept, mains, pts)
+        if route is None or not carve_route(lobes, n_kept, j, route, pts, o, step):
+            moved_centre(lobes, j, pts, mains)
+    return asked
+
+
+def carve_route(lobes: list[LobeState], n_kept: int, j: int, route: tuple[np.ndarray, int, int],
+                pts: np.ndarray, o: DecomposeOptions, step: float) -> bool:
+    """Give new lobe ``j`` the branch ``route`` (segment, parent, vertex), carving it out of the other new
+    lobes it enters, with the route alone as blocker, else with every other branch too; True (and
+    ``lobes`` updated) when the route is then clear and no branch enters a re-carved hull it stayed out of."""
+    tol = o.step / 2
+    wood = sample_polylines([route[0]], step)
+    in_way = [k for k in range(n_kept, len(lobes)) if k != j and enters(lobes[k], wood)]
+    for with_others in (False, True):
+        trial = list(lobes)
+        carved = []
+        for k in in_way:
+            others = [lb.segment for i, lb in enumerate(lobes) if i not in (j, k)] if with_others else []
+            blockers = np.concatenate([wood, sample_polylines(others, step)]) if others else wood
+            if carve_lobe(trial, k, pts, blockers, o.alpha_radius):
+                carved.append(k)
+        trial[j] = replace(trial[j], segment=route[0], parent=route[1], parent_vertex=route[2])
+        if not foreign(trial, j, route[0], tol, boxes(trial)) and not entered(lobes, trial, carved, tol):
+            lobes[:] = trial
+            return True
+        if not carved:
+            break  # no carving succeeded with the route alone: not retried with more blockers (not measured)
+    return False
+
+
+def moved_centre(lobes: list[LobeState], j: int, pts: np.ndarray, mains: BranchSet, tries: int = 32) -> None:
+    """Lobe ``j``'s centre moved to one of its own points outside every other lobe that a straight branch
+    reaches clear (every (n // ``tries``)-th of its n points by distance from the old centre, nearest
+    first), with that branch (in place; nothing changes when none does). The last resort for a lobe
+    whose centre lies in a pocket every route to which runs through other lobes: a lobe merged from two
+    clusters either side of the trunk has its mean near the trunk, among the lobes round it
+    (``part_overlaps`` moves a centre the same way when it lies inside another lobe)."""
+    own = pts[lobes[j].members]
+    own = own[np.argsort(np.linalg.norm(own - lobes[j].centre, axis=1), kind="stable")]
+    own = own[:: max(1, len(own) // tries)]
+    for c in own[~inside_foreign(lobes, j, own)]:
+        trial = list(lobes)
+        trial[j] = replace(lobes[j], centre=c)
+        route = straight_fallback(trial, j, mains)
+        if route is not None:
+            lobes[j] = replace(trial[j], segment=route[0], parent=route[1], parent_vertex=route[2])
+            return
+
+
+def entered(before: list[LobeState], after: list[LobeState], changed: list[int], tol: float) -> bool:
+    """True if a branch (sampled every ``tol``) enters one of the ``changed`` lobes' hulls in ``after``
+    where it stayed out of that lobe in ``before``: a hull carved again from its points keeps out of
+    the new blockers only, and may fill a tunnel cut before for another branch."""
+    segs = [resample_step(lb.segment, tol) for lb in after]
+    which = np.concatenate([np.full(len(s), i) for i, s in enumerate(segs)])
+    q = np.concatenate(segs)
+    for k in changed:
+        near = ((q > after[k].hull_vertices.min(axis=0)) & (q < after[k].hull_vertices.max(axis=0))).all(axis=1)
+        near &= which != k
+        now = set(which[near][inside(after[k].hull_vertices, after[k].hull_faces, q[near])])
+        was = set(which[near][inside(before[k].hull_vertices, before[k].hull_faces, q[near])])
+        if now - was:
+            return True
+    return False
