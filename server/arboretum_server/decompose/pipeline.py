@@ -31,6 +31,7 @@ from .secondary import branch_paths, make_lobes, zone_sources, zones
 from .separate import separate
 from .smooth import smooth_branchset
 from .state import Decomposition, build_hbl
+from .tunnel import behind
 
 STEPS = ("prepare", "graph", "separate", "mains", "lobes", "secondary", "hbl")
 CENTRE_RADIUS = 0.02
@@ -183,6 +184,7 @@ def decompose(points: np.ndarray, options: DecomposeOptions = DecomposeOptions()
     clock.lap("lobes")
     lobes, pred2, rerouted = make_lobes(groups, centres, pts, g.adjacency, root, zone, mains, grid, tau, o,
                                         tree=tree)
+    tunnelled = behind(lobes, 0, pts, mains, o)  # a branch no repair cleared: carve its way, or move its centre
     clock.lap("secondary")
     lobe_of = np.full(len(pts), -1, np.int32)
     lobe_of[fol] = k_lab
@@ -194,6 +196,7 @@ def decompose(points: np.ndarray, options: DecomposeOptions = DecomposeOptions()
         "labels": "leaf-off" if o.leaf_off else "given" if prep.labels is not None else "guessed",
         "components": g.components, "bridges": g.bridges, "foliage_source": source,
         "main_branches": len(mains.segments), "lobes": len(lobes), "rerouted": rerouted,
+        "tunnelled": tunnelled,
         "alpha_shapes": sum(lb.alpha for lb in lobes), "hull_fallbacks": sum(not lb.alpha for lb in lobes),
         "merge_threshold": tau,
     } | ({"fine_wood_points": int((lab == LEAF).sum())} if o.leaf_off else {})
