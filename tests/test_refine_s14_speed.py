@@ -105,7 +105,7 @@ def leaf_on_pine():
 def _run_counted(monkeypatch, fn, reference: bool) -> tuple[object, int, int]:
     """(result, (point, lobe) inside tests of the repairs, carved shapes computed) of ``fn()``, with the
     fast paths or with the reference code (every sample tested lobe by lobe, nothing remembered)."""
-    from arboretum_server.decompose import carve, clear, refine, secondary
+    from arboretum_server.decompose import carve, clear, secondary, tunnel
 
     tests, carvings = [0], [0]
     real = carve.carved_hull
@@ -120,7 +120,7 @@ def _run_counted(monkeypatch, fn, reference: bool) -> tuple[object, int, int]:
             def ref(lobes, j, q, box=None):
                 return _reference_inside_foreign(lobes, j, q, box, tests)
 
-            for mod in (clear, carve, secondary, refine):
+            for mod in (clear, carve, secondary, tunnel):
                 m.setattr(mod, "inside_foreign", ref)
             def blocked(lobes, j, a, b, step, box):
                 return _reference_blocked(lobes, j, a, b, step, box, tests)
