@@ -222,6 +222,7 @@ def test_refinements_with_the_slow_references_give_the_same_lobes(toy, monkeypat
         secondary,
         similarity,
         tetloops,
+        tunnel,
     )
     from arboretum_server.decompose.memo import ArrayMemo
 
@@ -231,7 +232,7 @@ def test_refinements_with_the_slow_references_give_the_same_lobes(toy, monkeypat
         refs = [mains.reference(b) for b in range(len(mains.full))]
         return refs, merge._hists(refs, n, bins), [merge.cKDTree(f) for f in refs]
 
-    for mod in (merge, clear, refine, secondary):
+    for mod in (merge, clear, refine, secondary, tunnel):
         if hasattr(mod, "resample_step"):
             monkeypatch.setattr(mod, "resample_step", merge.resample_step_reference)
     monkeypatch.setattr(secondary, "main_references", uncached)
