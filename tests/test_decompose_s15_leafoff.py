@@ -59,11 +59,34 @@ def test_leaf_off_must_be_true_or_false():
         DecomposeOptions(leaf_off="yes")
 
 
-def test_examples_stored_before_the_option_count_as_made_without_it():
+def test_leaf_off_makes_the_same_examples_so_the_same_run():
+    # examples carry no point labels: a leaf-off run of a stored scan stores nothing again (the review
+    # found every example stored twice when leaf_off was part of the run's identity)
     old = provenance("a.xyz", DecomposeOptions(), sha256="0" * 64)
-    old = replace(old, parameters={k: v for k, v in old.parameters.items() if k != "leaf_off"})
-    assert same_run(old, provenance("a.xyz", DecomposeOptions(), sha256="0" * 64))
-    assert not same_run(old, provenance("a.xyz", DecomposeOptions(leaf_off=True), sha256="0" * 64))
+    older = replace(old, parameters={k: v for k, v in old.parameters.items() if k != "leaf_off"})
+    off = provenance("a.xyz", DecomposeOptions(leaf_off=True), sha256="0" * 64)
+    assert same_run(old, off) and same_run(older, off) and off.parameters["leaf_off"] is True
+    assert not same_run(old, provenance("a.xyz", DecomposeOptions(seed=1), sha256="0" * 64))
+
+
+def test_a_leaf_off_run_of_a_stored_scan_stores_nothing_again(tmp_path, capsys):
+    lib = tmp_path / "L"
+    assert main(["decompose", str(COFFEE), "--library", str(lib), "--points", "2000", "--json"]) == 0
+    first = json.loads(capsys.readouterr().out)["stored"]
+    assert main(["decompose", str(COFFEE), "--library", str(lib), "--points", "2000", "--leaf-off", "--json"]) == 0
+    again = json.loads(capsys.readouterr().out)
+    assert len(first) == 8 and again["stored"] == [] and again["already"] == first
+
+
+def test_all_fine_wood_gets_the_all_foliage_note_in_its_own_words():
+    from arboretum_server.decompose.notes import scan_notes
+
+    guessed = scan_notes({"points": 12000, "leaf_points": 11700, "labels": "guessed"})
+    off = scan_notes({"points": 12000, "leaf_points": 0, "fine_wood_points": 11700, "labels": "leaf-off"})
+    assert guessed[0].startswith("97.5% of the points are foliage (guessed labels)")
+    assert off == ["97.5% of the points read as fine, space-filling wood and almost none as stems: the branches "
+                   "were routed through it and are a guess (is this one tree, with its trunk?)"]
+    assert scan_notes({"points": 12000, "leaf_points": 0, "fine_wood_points": 300, "labels": "leaf-off"}) == []
 
 
 def test_the_command_says_leaf_off_and_saves_an_all_wood_hbl(tmp_path, capsys):
@@ -83,7 +106,7 @@ def test_the_command_says_leaf_off_and_saves_an_all_wood_hbl(tmp_path, capsys):
     assert len(hbl.labels) == 12000 and not hbl.labels.any()
 
 
-def test_library_build_declares_every_scan_leaf_off_and_names_a_change(tmp_path):
+def test_library_build_declares_every_scan_leaf_off(tmp_path):
     from arboretum_server.batch.build import BuildOptions, build_library
 
     lib = tmp_path / "lib"
@@ -91,15 +114,13 @@ def test_library_build_declares_every_scan_leaf_off_and_names_a_change(tmp_path)
     first = build_library(scans, lib, BuildOptions(workers=1, points=1500))
     assert first.count("added") == 1 and first.records[0].stats["labels"] == "guessed"
     again = build_library(scans, lib, BuildOptions(workers=1, points=1500, leaf_off=True))
-    assert again.count("skipped") == 1
-    assert again.records[0].notes[-1].startswith(
-        f"its {len(first.records[0].examples)} examples were made with no --leaf-off, not this run's --leaf-off:")
+    assert again.count("skipped") == 1 and again.records[0].notes == []  # the same examples: nothing to say
     redone = build_library(scans, lib, BuildOptions(workers=1, points=1500, leaf_off=True, rebuild=True))
     rec = redone.records[0]
     assert rec.status == "added" and rec.stats["leaf_points"] == 0 and rec.stats["labels"] == "leaf-off"
     with Library.open(lib, readonly=True) as L:
         assert {L.provenance(i).parameters["leaf_off"] for i in rec.examples} == {True}
-        assert len(L) == len(rec.examples)
+        assert len(L) == len(rec.examples) == len(first.records[0].examples)
 
 
 def test_the_service_opens_a_leaf_off_draft_all_wood(tmp_path):

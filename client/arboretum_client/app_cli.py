@@ -45,7 +45,7 @@ def register(subparsers) -> None:
     p.add_argument("--main", type=int, metavar="N", help="main branches of the --scan decomposition (overrides --species)")
     p.add_argument("--lobes", type=int, metavar="N", help="lobes of the --scan decomposition (overrides --species)")
     p.add_argument("--leaf-off", action="store_true",
-                   help="the --scan tree bore no leaves: its points are shown and stored as wood")
+                   help="the --scan tree bore no leaves: the draft reports every point as wood")
     p.add_argument("--size", default="1280x720", help="window or image size WIDTHxHEIGHT (default 1280x720)")
     p.add_argument("--headless", action="store_true", help="render without a display (EGL); needs --script")
     p.add_argument("--script", metavar="S", help="JSON/YAML script of input events and tool actions")

@@ -40,9 +40,8 @@ from arboretum_library.folders import ARRAYS, META, safe_prefix
 
 from .tasks import NOTES_KEY, SCAN_EXAMPLES_KEY
 
-COMPARED = {"points": None, "height": None, "seed": None, "leaf_off": False}
-"""Decomposition options a build sets besides the species, with the value an example stored before the
-option existed was made with (None: compared only when stored); a stored scan made with others gets a note."""
+COMPARED = ("points", "height", "seed")
+"""Decomposition options a build sets besides the species; a stored scan made with others gets a note."""
 
 
 def scan_stem(path: str) -> str:
@@ -105,24 +104,15 @@ def _skip(lib, r, ids: list[str], options: Any) -> None:
         r.notes.append(f"the library holds {len(run)} examples of it, not the {int(want)} it gives: a "
                        "--rebuild stopped while deleting the old ones; --rebuild again replaces them all")
     differ = [("species", prov.species, r.species)] if options is not None and prov.species != r.species else []
-    stored = {k: params.get(k, was) for k, was in COMPARED.items() if k in params or was is not None}
-    differ += [(k, v, getattr(options, k)) for k, v in stored.items()
-               if options is not None and v != getattr(options, k)]
+    differ += [(k, params.get(k), getattr(options, k)) for k in COMPARED
+               if options is not None and k in params and params.get(k) != getattr(options, k)]
     r.species = prov.species  # what is stored, not what this run would have made
     if differ:
-        was = ", ".join(_option(k, old) for k, old, _ in differ)
-        now = ", ".join(_option(k, new) for k, _, new in differ)
+        was = ", ".join(f"--{k} {old}" for k, old, _ in differ)
+        now = ", ".join(f"--{k} {new}" for k, _, new in differ)
         r.notes.append(f"its {len(ids)} examples were made with {was}, not this run's {now}: left as they "
                        "are; --rebuild decomposes it again with this run's options (or delete them: "
                        "arboretum library delete)")
-
-
-def _option(name: str, value) -> str:
-    """How the command line gives ``name`` = ``value``: '--seed 3', '--leaf-off', 'no --leaf-off'."""
-    flag = "--" + name.replace("_", "-")
-    if isinstance(value, bool):
-        return flag if value else f"no {flag}"
-    return f"{flag} {value}"
 
 
 def _damaged(lib, r, ids: list[str]) -> bool:

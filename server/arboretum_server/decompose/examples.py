@@ -65,18 +65,20 @@ NOTES_KEY = "decompose_notes"
 skips it)."""
 RUN_RECORDS = (SCAN_EXAMPLES_KEY, NOTES_KEY)
 """Provenance parameters that record what a run gave, not how it was made."""
+LABELS_ONLY = ("leaf_off",)
+"""Decomposition options that change the reported point labels only: examples carry no labels, so runs that
+differ in them make the same examples (session 15's review: ``--leaf-off`` stored every example twice)."""
 
 
 def run_key(prov: Provenance, up_axis: str | None = None) -> str:
     """What two examples of one file share when one run made them: the species and every decomposition
-    parameter with the up axis (``up_axis`` stands in for one stored without it), as JSON, numbers as
-    floats (a height stored as 2 by a Python caller is the command's 2.0). ``decompose`` stores one file
-    with other options beside a run; ``decompose`` and ``library build`` both tell the runs apart by
-    this (``split_runs``)."""
+    parameter but ``LABELS_ONLY``, with the up axis (``up_axis`` stands in for one stored without it), as
+    JSON, numbers as floats (a height stored as 2 by a Python caller is the command's 2.0). ``decompose``
+    stores one file with other options beside a run; ``decompose`` and ``library build`` both tell the
+    runs apart by this (``split_runs``)."""
     params = {k: float(v) if isinstance(v, int | float) and not isinstance(v, bool) else v
-              for k, v in prov.parameters.items() if k not in RUN_RECORDS}
+              for k, v in prov.parameters.items() if k not in RUN_RECORDS and k not in LABELS_ONLY}
     params.setdefault(UP_AXIS_KEY, up_axis)
-    params.setdefault("leaf_off", False)  # stored before session 15: there was no such option
     return json.dumps([prov.species, params], sort_keys=True)
 
 

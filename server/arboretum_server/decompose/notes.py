@@ -106,8 +106,12 @@ def scan_notes(stats: dict) -> list[str]:
         out.append(f"{n} stray point{'s' if n > 1 else ''} left out: alone, or in small groups below or above "
                    "the tree, over a tenth of its height from the rest of the cloud (scanner noise, a bird?); "
                    "they would have set the trunk base or the height")
-    leaf = stats.get("leaf_points", 0) / max(stats.get("points", 0), 1)
-    if leaf >= ALL_LEAF:
+    off = stats.get("labels") == "leaf-off"  # declared leafless: the guess's "leaf" is fine wood, routed alike
+    leaf = stats.get("fine_wood_points" if off else "leaf_points", 0) / max(stats.get("points", 0), 1)
+    if leaf >= ALL_LEAF and off:
+        out.append(f"{leaf:.1%} of the points read as fine, space-filling wood and almost none as stems: the "
+                   "branches were routed through it and are a guess (is this one tree, with its trunk?)")
+    elif leaf >= ALL_LEAF:
         out.append(f"{leaf:.1%} of the points are foliage ({stats['labels']} labels) and almost none wood: the "
                    "branches were routed through foliage and are a guess (is this one tree, with its trunk?)")
     if stats.get("width_ratio", 1.0) < LINE:
