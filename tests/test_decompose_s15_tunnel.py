@@ -72,13 +72,42 @@ def test_decompose_clears_what_make_lobes_left_crossing(monkeypatch):
     assert len(d.hbl.lobes) == 8
 
 
-def test_the_scanned_pine_that_crossed_is_clear():
+def test_the_scanned_pine_that_crossed_is_clear(monkeypatch):
     """The virtual scanner's pine, seed 13, leaf-on: one lobe at the top of the leader had a branch up the
-    crown through 8 lobes (0.56 of the height); it now starts at the trunk's top vertex."""
+    crown through 8 lobes (0.56 of the height); it now starts at the trunk's top vertex, one lobe carved
+    round it, the leaves still covered."""
+    from arboretum_library.model import LEAF
+    from arboretum_server.decompose import tunnel
+    from arboretum_server.decompose.evaluate import COVER_TOL, lobe_distance
     from arboretum_server.decompose.report import grow_truth, virtual_scan
 
-    pts, _ = virtual_scan(grow_truth("harmonic", "pine", 13), "leaf-on", 13)
+    carved = []
+    real = tunnel.carve_lobe
+
+    def counted(lobes, k, *a, **kw):
+        carved.append(k)
+        return real(lobes, k, *a, **kw)
+
+    monkeypatch.setattr(tunnel, "carve_lobe", counted)
+    pts, lab = virtual_scan(grow_truth("harmonic", "pine", 13), "leaf-on", 13)
     d = decompose(pts, DecomposeOptions(species="pine"))
-    assert d.stats["tunnelled"] == 1 and crossings(d.hbl) == 0
+    assert d.stats["tunnelled"] == 1 and crossings(d.hbl) == 0 and len(carved) == 1
     lengths = [float(np.linalg.norm(np.diff(lb.segment, axis=0), axis=1).sum()) for lb in d.lobes]
     assert max(lengths) < 0.3 and len(d.lobes) == 40
+    leaves = d.to_output((pts[lab == LEAF] - d.root_scan) * d.scale)
+    assert (lobe_distance(d.hbl, leaves) <= COVER_TOL * d.hbl.height / 0.8).mean() >= 0.998
+
+
+def test_when_no_carving_clears_it_the_lobe_centre_moves(toy, monkeypatch):
+    from arboretum_server.decompose import tunnel
+
+    monkeypatch.setattr(tunnel, "carve_route", lambda *a, **k: False)
+    tol = toy.options.step / 2
+    lobes = list(toy.lobes)
+    j, k = _crossing_pair(lobes, tol)
+    lobes[j] = replace(lobes[j], segment=_through(lobes, j, k))
+    assert behind(lobes, 0, toy.points, toy.mains, toy.options) == 1
+    assert not foreign(lobes, j, lobes[j].segment, tol, boxes(lobes)) and len(lobes) == 8
+    assert not np.array_equal(lobes[j].centre, toy.lobes[j].centre)
+    assert any(np.abs(toy.points[lobes[j].members] - lobes[j].centre).sum(axis=1) == 0)  # one of its points
+    assert all(lobes[i] is toy.lobes[i] for i in range(8) if i != j)  # nothing else touched
