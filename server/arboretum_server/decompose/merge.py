@@ -318,3 +318,8 @@ def merge_secondaries(paths: list[np.ndarray], mains: BranchSet, tau: float, n: 
         opt = choose_parent(ks[p], hp[p], hm)
         out.append(attach(path, mains, opt, int(ks[p, opt]), trees[opt]))
     return out
+
+
+def warm() -> None:
+    """Run ``resample_step``'s compiled loop once (see ``tetloops.warm``)."""
+    resample_step(np.array([[0.0, 0, 0], [0, 0, 1]]), 0.25)

@@ -241,3 +241,14 @@ def _closed_kernel(faces: np.ndarray, n: int, one_piece: bool) -> bool:  # pragm
             root[u] = v
             pieces -= 1
     return pieces == 1
+
+
+def warm() -> None:
+    """Run every loop here once on a tiny input of the dtypes the alpha shapes use (scipy's int32
+    simplices), so numba loads or compiles them now: the service calls it when it starts
+    (``dispatch.warm_up``), not inside a user's first refinement."""
+    p = np.array([[[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]])
+    centre, r = circumspheres(p)
+    held(centre, r, np.zeros((1, 3)))
+    boundary(np.array([[0, 1, 2, 3]], np.int32), np.full((1, 4), -1, np.int32), np.ones(1, bool))
+    is_closed_manifold(np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]))

@@ -4,7 +4,9 @@ Each module of ``handlers`` (listed in ``HANDLER_MODULES``) exports ``HANDLERS``
 class to a function ``(ctx, request) -> Reply | Job``. A new concern plugs in as one more module. A module
 that cannot be imported (an optional dependency missing) is logged and its operations reply 'unavailable'.
 A module may list in ``WARM`` the heavy modules its inline handlers use; ``serve`` imports them in a
-thread as soon as it listens, so the first such request does not stall every client behind an import.
+thread as soon as it listens, and calls a heavy module's ``warm()`` when it has one (its compiled loops
+loaded from numba's cache, or compiled: about 5 s for refinement's on a fresh install), so the first such
+request does not stall every client behind an import or a compilation.
 """
 
 from __future__ import annotations
@@ -43,12 +45,14 @@ def load_handlers(modules: tuple[str, ...] = HANDLER_MODULES) -> dict[type, Hand
 
 
 def warm_up(modules: tuple[str, ...] = HANDLER_MODULES) -> None:
-    """Import what the handler modules list in ``WARM``."""
+    """Import what the handler modules list in ``WARM``, and run their ``warm()``."""
     for name in modules:
         try:
             mod = importlib.import_module(f"{__package__}.handlers.{name}")
             for heavy in getattr(mod, "WARM", ()):
-                importlib.import_module(heavy)
+                warm = getattr(importlib.import_module(heavy), "warm", None)
+                if warm is not None:
+                    warm()
         except ImportError as exc:
             log.warning("warm-up of handlers.%s: %s", name, exc)
 

@@ -25,7 +25,9 @@ from arboretum_server.service.jobs import Job
 from arboretum_server.service.sessions import RefineDraft, Session
 
 EDITS = ("remove_lobe", "insert_lobe", "merge_lobes", "split_lobe")
-WARM = ("arboretum_server.decompose.refine", "sklearn.cluster", "arboretum_server.decompose.examples")
+WARM = ("arboretum_server.decompose.refine", "sklearn.cluster", "arboretum_server.decompose.examples",
+        "arboretum_server.decompose.tetloops", "arboretum_server.decompose.merge",
+        "arboretum_server.decompose.similarity")
 MAX_SPLIT_STROKES = 100
 """Strokes of one split (one new lobe each; k-means with that many centres runs in the server's loop)."""
 
