@@ -304,8 +304,8 @@ def shortest_path_to(adj: csr_matrix, root: int, target: int, known: np.ndarray)
     predecessors could differ only where two neighbours give a node exactly the same distance (the full
     run's heap holds more nodes, so may settle tied nodes in another order; 16,717 limited runs on graphs
     of integer weights never did). ``path_is_unique`` rules that out along the target's path; where it does
-    not hold, the full run decides. The reroutes of the secondary branches settle 8-99 % of the points
-    (median 58 %, the leaf-on pine): their lobes lie far out.
+    not hold, the full run decides. The reroutes of the secondary branches settle 7-99 % of the points
+    (median 57 %, the leaf-on pine): their lobes lie far out.
     """
     limit = path_cost(adj, known)
     dist, pred = dijkstra(adj, directed=True, indices=root, return_predecessors=True, limit=limit)
