@@ -239,7 +239,9 @@ def run_then_kill(script: str, root: Path, delay: float, on_ready=None) -> None:
 
 def build_then_signal(folder: Path, scans: int, points: int, stop) -> tuple[int, str, Path, list[Path]]:
     """``library build`` of ``scans`` synthetic scans of ``points`` points into ``folder``/lib, 2 workers,
-    in its own session; once its first example is stored, ``stop(proc)`` (send a signal). Returns (exit
+    in its own session; once its first examples are stored (folders in ``examples/`` and no write under way
+    in ``.tmp/``: a folder renamed in before its catalog commit is rolled back by a signal, and the build
+    then removes the library it created), ``stop(proc)`` (send a signal). Returns (exit
     code, stderr with carriage returns as newlines, the library, the scans)."""
     import os
     import signal
@@ -257,7 +259,11 @@ def build_then_signal(folder: Path, scans: int, points: int, stop) -> tuple[int,
                             env={**os.environ, "OMP_WAIT_POLICY": "PASSIVE"})
     try:
         t0 = time.monotonic()
-        while not (lib / "examples").is_dir() or not any((lib / "examples").iterdir()):
+        def stored() -> bool:
+            ex, tmp = lib / "examples", lib / ".tmp"
+            return ex.is_dir() and any(ex.iterdir()) and tmp.is_dir() and not any(tmp.iterdir())
+
+        while not stored():
             assert proc.poll() is None and time.monotonic() - t0 < 120
             time.sleep(0.1)
         stop(proc)
