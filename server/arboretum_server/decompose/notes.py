@@ -108,12 +108,11 @@ def scan_notes(stats: dict) -> list[str]:
                    "they would have set the trunk base or the height")
     off = stats.get("labels") == "leaf-off"  # declared leafless: the guess's "leaf" is fine wood, routed alike
     leaf = stats.get("fine_wood_points" if off else "leaf_points", 0) / max(stats.get("points", 0), 1)
-    if leaf >= ALL_LEAF and off:
-        out.append(f"{leaf:.1%} of the points read as fine, space-filling wood and almost none as stems: the "
-                   "branches were routed through it and are a guess (is this one tree, with its trunk?)")
-    elif leaf >= ALL_LEAF:
-        out.append(f"{leaf:.1%} of the points are foliage ({stats['labels']} labels) and almost none wood: the "
-                   "branches were routed through foliage and are a guess (is this one tree, with its trunk?)")
+    if leaf >= ALL_LEAF:
+        what = ("read as fine, space-filling wood and almost none as stems: the branches were routed through it"
+                if off else f"are foliage ({stats['labels']} labels) and almost none wood: the branches were "
+                "routed through foliage")
+        out.append(f"{leaf:.1%} of the points {what} and are a guess (is this one tree, with its trunk?)")
     if stats.get("width_ratio", 1.0) < LINE:
         out.append(f"the cloud is nearly a straight line (it spreads {stats['width_ratio']:.1%} as wide as it "
                    "is long): there is no crown to decompose, and the branches lie along that line")
