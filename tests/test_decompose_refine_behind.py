@@ -1,5 +1,5 @@
 """Refinements whose new lobe lies behind another new one (the outer part of a lobe, inserted or split
-off) still get a secondary branch clear of every lobe (``refine._behind_new``)."""
+off) still get a secondary branch clear of every lobe (``tunnel.behind``, the last step of ``make_lobes``)."""
 
 from __future__ import annotations
 
@@ -56,7 +56,7 @@ def test_a_lobe_behind_another_new_lobe_gets_a_branch_that_crosses_no_lobe(leaf_
 
 def test_giving_way_keeps_the_tunnel_cut_for_a_new_branch():
     # The leaf-off pine, seed 3: inserting the outer half of lobe 1 routes the new lobe's branch through
-    # a tunnel carved in the other new lobe (``_behind_new``); giving way to two kept branches then
+    # a tunnel carved in the other new lobe (``tunnel.behind``); giving way to two kept branches then
     # carved that lobe again from its points with only the kept branches as blockers, filling the
     # tunnel (1 crossing, a reviewer's case). The other new branches now stay blockers.
     from arboretum_server.decompose.evaluate import connected, crossings

@@ -107,7 +107,7 @@ def test_refinements_of_a_pine_cross_no_lobe(species, seed, case):
     # running through new lobes were routed again and buried centres freed, 19 inserts, 19 merges and
     # 9 splits of 85 each (these two pines, an apple and a cherry) crossed a lobe; then 1, 0 and 1, all
     # lobe 6 of the leaf-on pine, whose outer part lies behind the rest of the lobe (session 7:
-    # refine._behind_new); now none.
+    # tunnel.behind); now none.
     from arboretum_server.decompose.evaluate import crossings
     from arboretum_server.decompose.options import DecomposeOptions
     from arboretum_server.decompose.pipeline import decompose

@@ -410,8 +410,8 @@ def test_a_new_lobe_beside_a_trunk_wrapped_by_a_kept_lobe_gets_a_clear_branch(rn
     assert (winding_numbers(v, f, mains.segments[0][3:-3]) > 0.5).all()  # the trunk is inside the kept lobe
     g = knn_graph(pts, 5, 0.05)
     zone = zones(pts, [kept_idx, new_idx])
-    lobes, _, _ = make_lobes([new_idx], pts[new_idx].mean(axis=0)[None], pts, g.adjacency, 300, zone, mains,
-                             centre_grid(pts, 0.005), 0.02, DecomposeOptions(), (kept,))
+    lobes, _, _, _ = make_lobes([new_idx], pts[new_idx].mean(axis=0)[None], pts, g.adjacency, 300, zone, mains,
+                                centre_grid(pts, 0.005), 0.02, DecomposeOptions(), (kept,))
     assert len(lobes) == 2 and np.array_equal(lobes[0].members, kept_idx)
     seg = lobes[1].segment
     assert np.allclose(seg[0], mains.segments[0][lobes[1].parent_vertex]) and np.allclose(seg[-1], lobes[1].centre)

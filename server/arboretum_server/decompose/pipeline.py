@@ -31,7 +31,6 @@ from .secondary import branch_paths, make_lobes, zone_sources, zones
 from .separate import separate
 from .smooth import smooth_branchset
 from .state import Decomposition, build_hbl
-from .tunnel import behind
 
 STEPS = ("prepare", "graph", "separate", "mains", "lobes", "secondary", "hbl")
 CENTRE_RADIUS = 0.02
@@ -182,9 +181,8 @@ def decompose(points: np.ndarray, options: DecomposeOptions = DecomposeOptions()
     sources = zone_sources(pts, np.concatenate(groups))
     zone = zones(pts, groups, sources)
     clock.lap("lobes")
-    lobes, pred2, rerouted = make_lobes(groups, centres, pts, g.adjacency, root, zone, mains, grid, tau, o,
-                                        tree=tree)
-    tunnelled = behind(lobes, 0, pts, mains, o)  # a branch no repair cleared: carve its way, or move its centre
+    lobes, pred2, rerouted, tunnelled = make_lobes(groups, centres, pts, g.adjacency, root, zone, mains, grid,
+                                                   tau, o, tree=tree)
     clock.lap("secondary")
     lobe_of = np.full(len(pts), -1, np.int32)
     lobe_of[fol] = k_lab

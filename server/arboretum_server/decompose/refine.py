@@ -7,8 +7,8 @@ must start is carved, ``carve.unwrap``), then the radii and records. A lobe that
 through a new lobe is carved out of it (``_give_way``, in several closed pieces if need be), or, when
 that fails, routed again with them. A new lobe's branch that no repair clears (it lies behind another new
 lobe: the outer part of a lobe, inserted or split off) is routed round the kept lobes alone, and the new
-lobes in its way are carved out of it (``_behind_new``, ``tunnel.behind``); failing that, its centre moves to one of its own
-points that a straight branch reaches clear (``tunnel.moved_centre``).
+lobes in its way are carved out of it (``tunnel.behind``, the last step of ``make_lobes``); failing that,
+its centre moves to one of its own points that a straight branch reaches clear (``tunnel.moved_centre``).
 Lobes keep their order; new ones come last (a lobe that loses all its points is dropped). Point indices
 refer to ``Decomposition.points``; strokes are in the HBL's output frame.
 """
@@ -28,7 +28,7 @@ from .clear import boxes, foreign
 from .merge import sample_polylines
 from .secondary import make_lobes, zone_sources, zones
 from .state import Decomposition, LobeState, build_hbl
-from .tunnel import behind, enters
+from .tunnel import enters
 
 ROUTE_ROUNDS = 3
 """Routing rounds of a refinement (``make_lobes`` calls): kept lobes whose branches run through the new
@@ -86,9 +86,9 @@ def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], c
             t0: float, op: str, order: list[int] | None = None) -> Decomposition:
     """Route the new lobes over ``groups`` after ``kept`` and rebuild the records.
 
-    A new lobe's branch still crossing another new lobe carves its way through it (``_behind_new``); a
-    kept lobe whose secondary branch would run through a new lobe is carved out of it, else routed
-    again with them.
+    A new lobe's branch still crossing another new lobe carves its way through it (``tunnel.behind`` in
+    ``make_lobes``); a kept lobe whose secondary branch would run through a new lobe is carved out of it,
+    else routed again with them.
     ``order`` (one slot per kept lobe and group, in that order) gives each lobe's place in the result.
     """
     kept, groups, centres = list(kept), list(groups), list(centres)
@@ -104,7 +104,6 @@ def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], c
         zone = zones(d.points, [lb.members for lb in kept] + groups, sources)
         lobes = make_lobes(groups, np.array(centres), d.points, d.adjacency, d.root_index, zone, d.mains,
                            d.grid, d.tau, d.options, tuple(kept), (None,) * (len(groups) - len(hulls)) + hulls)[0]
-        _behind_new(lobes, len(kept), d)
         cross = sorted(_crossing_new(lobes, len(kept), d.options.step / 2)) if rnd + 1 < ROUTE_ROUNDS else []
         if cross:  # the new lobes give way to the branches already there, if carving lets them
             _give_way(lobes, len(kept), cross, d.points, d.options.alpha_radius)
@@ -145,14 +144,9 @@ def _give_way(lobes: list[LobeState], n_kept: int, cross: list[int], pts: np.nda
     leaving the trunk there out (helper-115's sweep: 8 far merges left 1-9 crossings routing them again)."""
     wood = sample_polylines([lobes[i].segment for i in cross], step)
     for k in range(n_kept, len(lobes)):
-        if enters(lobes[k], wood):  # the other new branches stay blockers: keep _behind_new's tunnels open
+        if enters(lobes[k], wood):  # the other new branches stay blockers: keep tunnel.behind's tunnels open
             rest = sample_polylines([lobes[i].segment for i in range(n_kept, len(lobes)) if i != k], step)
             carve_lobe(lobes, k, pts, np.concatenate([wood, rest]), radius, pieces=True)
-
-
-def _behind_new(lobes: list[LobeState], n_kept: int, d: Decomposition) -> None:
-    """``tunnel.behind`` for the new lobes (indices >= ``n_kept``) of a refinement of ``d``."""
-    behind(lobes, n_kept, d.points, d.mains, d.options)
 
 
 def _crossing_new(lobes: list[LobeState], n_kept: int, tol: float) -> set[int]:

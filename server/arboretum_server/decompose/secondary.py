@@ -13,7 +13,8 @@ paper, which has no such guarantee), else a two-piece one through one of the lob
 clears because the main branches there run inside foreign lobes (an alpha shape fills the gap where a main
 branch passes through its foliage: the pine's lobes wrap its trunk), those lobes are rebuilt with the main
 branches carved out (``unwrap``) and both repairs are tried again; if still none clears, the crossing path
-is kept here, and ``pipeline.decompose`` carves its way or moves its lobe's centre (``tunnel.behind``).
+is carved its way through the other new lobes, or its lobe's centre moves (``tunnel.behind``, the last
+step of ``make_lobes``).
 
 Every secondary branch is smoothed (smooth.py, ours) with its connection point on the main branch and its
 tip at the lobe centre fixed; where the smoothed curve would enter a foreign lobe and the unsmoothed
@@ -45,6 +46,7 @@ from .merge import (
 from .options import DecomposeOptions
 from .smooth import smooth_polylines, vertex_limits
 from .state import LobeState
+from .tunnel import behind
 
 ZONE_RADIUS = 0.015
 """Points within this distance (0.8 m frame) of a lobe's points belong to its zone."""
@@ -125,7 +127,7 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
                root: int, zone: np.ndarray, mains: BranchSet, grid: BoxGrid, tau: float,
                o: DecomposeOptions, others: tuple[LobeState, ...] = (),
                hulls: tuple[LobeState | None, ...] = (), tree: cKDTree | None = None,
-               ) -> tuple[list[LobeState], np.ndarray, int]:
+               ) -> tuple[list[LobeState], np.ndarray, int, int]:
     """Lobes over the point-index ``groups`` with hulls and routed, merged secondary branches.
 
     ``others`` are lobes kept from before (zone ids 0..len(others)-1; the new lobes follow them).
@@ -135,7 +137,9 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
     Returns every lobe (``others`` first, then the new ones; any of them may come back with the main
     branches carved out, see ``unwrap``, or carved round a new lobe whose centre it buried, see
     ``part_overlaps``, which may instead move that new lobe's centre onto one of its own points), the
-    routing predecessors (N,) and the number of branches routed again.
+    routing predecessors (N,), the number of branches routed again and the number no repair cleared,
+    whose way ``tunnel.behind`` carved through the other new lobes (or whose centre it moved): no new
+    lobe's branch enters a lobe it does not feed.
     """
     lobes = list(others) + _hulled(groups, centres, pts, hulls, o.alpha_radius)
     part_overlaps(lobes, len(others), mains, pts, o.alpha_radius)
@@ -160,7 +164,7 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
             continue
         rerouted += 1
         box = _reroute(lobes, j, targets[j - len(others)], route, box)
-    return lobes, pred, rerouted
+    return lobes, pred, rerouted, behind(lobes, len(others), pts, mains, o)
 
 
 def _hulled(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, hulls: tuple[LobeState | None, ...],

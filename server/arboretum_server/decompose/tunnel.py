@@ -1,8 +1,8 @@
 """Last resorts for a lobe whose secondary branch still crosses another lobe after every repair of
 ``secondary.make_lobes`` (ours; VRTree has no such guarantee): a straight or bent branch carved through
 the lobes in its way (``behind``, ``carve_route``), else the lobe's centre moved to one of its own points
-that a straight branch reaches clear (``moved_centre``). Refinement runs them on the lobes it makes
-(``refine._behind_new``), the decomposition on all of its lobes.
+that a straight branch reaches clear (``moved_centre``). ``make_lobes`` runs them last, on the lobes it
+makes: a refinement's new lobes, or every lobe of a decomposition.
 """
 
 from __future__ import annotations
