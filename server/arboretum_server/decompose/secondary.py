@@ -12,9 +12,9 @@ from the nearest main-branch vertex whose segment to the lobe centre stays clear
 paper, which has no such guarantee), else a two-piece one through one of the lobe's own points. If none
 clears because the main branches there run inside foreign lobes (an alpha shape fills the gap where a main
 branch passes through its foliage: the pine's lobes wrap its trunk), those lobes are rebuilt with the main
-branches carved out (``unwrap``) and both repairs are tried again; if still none clears, the crossing path
-is carved its way through the other new lobes, or its lobe's centre moves (``tunnel.behind``, the last
-step of ``make_lobes``).
+branches carved out (``unwrap``) and both repairs are tried again; if still none clears, the last step of
+``make_lobes`` (``tunnel.behind``) carves the branch a way through the other new lobes, or moves its
+lobe's centre.
 
 Every secondary branch is smoothed (smooth.py, ours) with its connection point on the main branch and its
 tip at the lobe centre fixed; where the smoothed curve would enter a foreign lobe and the unsmoothed
@@ -138,8 +138,8 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
     branches carved out, see ``unwrap``, or carved round a new lobe whose centre it buried, see
     ``part_overlaps``, which may instead move that new lobe's centre onto one of its own points), the
     routing predecessors (N,), the number of branches routed again and the number no repair cleared,
-    whose way ``tunnel.behind`` carved through the other new lobes (or whose centre it moved): no new
-    lobe's branch enters a lobe it does not feed.
+    which ``tunnel.behind`` gave a way carved through the other new lobes or a moved centre (a branch
+    stays crossing only when neither clears it).
     """
     lobes = list(others) + _hulled(groups, centres, pts, hulls, o.alpha_radius)
     part_overlaps(lobes, len(others), mains, pts, o.alpha_radius)
