@@ -195,6 +195,13 @@ def test_carving_answers_as_the_kd_tree_query_did(rng):
         assert (_held(tet.centres[live], tet.radii[live], blockers) == 2).any()  # the KD-tree decided some
 
 
+def _first_far(cand: np.ndarray, ref: np.ndarray, tau: float) -> int:
+    """The first vertex of ``cand`` at least ``tau`` from every vertex of ``ref`` (brute force), else its length."""
+    d = np.linalg.norm(cand[:, None, :] - ref[None, :, :], axis=2).min(axis=1)
+    far = np.flatnonzero(d >= tau)
+    return int(far[0]) if len(far) else len(cand)
+
+
 def test_merged_prefixes_match_one_reference_at_a_time(rng):
     from scipy.spatial import cKDTree
 
@@ -203,8 +210,9 @@ def test_merged_prefixes_match_one_reference_at_a_time(rng):
     cands = [np.cumsum(rng.normal(0, 0.01, (m, 3)), axis=0) for m in (1, 2, 9, 30)]
     refs = [np.cumsum(rng.normal(0, 0.01, (m, 3)), axis=0) for m in (1, 12, 40)]
     for tau in (0.0, 0.005, 0.02, 1.0):
-        expect = np.stack([merged_prefix(cands, r, tau) for r in refs], axis=1)
+        expect = np.array([[_first_far(c, r, tau) for r in refs] for c in cands])
         assert np.array_equal(merged_prefixes(cands, [cKDTree(r) for r in refs], tau), expect)
+        assert np.array_equal(np.stack([merged_prefix(cands, r, tau) for r in refs], axis=1), expect)
 
 
 def _arrays(d):

@@ -111,13 +111,9 @@ def centre_paths(paths: list[np.ndarray], grid: BoxGrid) -> list[np.ndarray]:
 
 
 def merged_prefix(cands: list[np.ndarray], ref: np.ndarray, tau: float, tree: cKDTree | None = None) -> np.ndarray:
-    """For each candidate polyline, the index of its first vertex farther than ``tau`` from ``ref``
-    (``tree``: a KD-tree of ``ref``, when known)."""
-    tree = tree if tree is not None else cKDTree(ref)
-    lens = np.array([len(c) for c in cands])
-    d, _ = tree.query(np.concatenate(cands))
-    far = np.split(d >= tau, np.cumsum(lens)[:-1])
-    return np.array([int(np.argmax(f)) if f.any() else len(f) for f in far])
+    """For each candidate polyline (each >= 1 vertex), the index of its first vertex at least ``tau`` from
+    ``ref`` (its length when there is none; ``tree``: a KD-tree of ``ref``, when known)."""
+    return merged_prefixes(cands, [tree if tree is not None else cKDTree(ref)], tau)[:, 0]
 
 
 def merged_prefixes(cands: list[np.ndarray], trees: list[cKDTree], tau: float) -> np.ndarray:
