@@ -71,7 +71,8 @@ def _full_resolution_row() -> Row:
 
 def _million_row() -> Row:
     """``decompose --points 0`` on a million points of the toy tree (a full terrestrial scan's size): one run,
-    19-27 s (session 14; 39-42 s and 1.43 GB before), with each step's time."""
+    13.6-14.3 s (session 17; 18-19 s before its queries on every core, 39-42 s and 1.43 GB before session 14),
+    with each step's time."""
     from dataclasses import replace
 
     from arboretum_server.decompose.options import DecomposeOptions

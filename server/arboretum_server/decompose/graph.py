@@ -51,6 +51,17 @@ def _edges(a: np.ndarray, b: np.ndarray, w: np.ndarray, n: int) -> csr_matrix:
     return m
 
 
+PARALLEL_MIN = 50_000
+"""``query`` splits a query of this many points or more over every core (each point's answer is its own, so
+the same answer; below, starting the threads costs more than it saves)."""
+
+
+def query(tree: cKDTree, q: np.ndarray, **kw) -> tuple[np.ndarray, np.ndarray]:
+    """``tree.query(q, **kw)`` on every core for ``PARALLEL_MIN`` points or more: the whole-cloud queries of a
+    ``--points 0`` run (a million points' 17 nearest: 4.7 s on one core, 2.7 s on this machine's two)."""
+    return tree.query(q, workers=-1 if len(q) >= PARALLEL_MIN else 1, **kw)
+
+
 QUERY_CHUNK = 1 << 16
 """``knn_graph`` asks the KD-tree for this many points' neighbours at a time, keeping the indices as int32:
 the whole (N, K + 1) int64 answer of one query is never held (136 MB on a million points)."""
@@ -64,7 +75,7 @@ def _neighbours(tree: cKDTree, points: np.ndarray, kq: int) -> tuple[np.ndarray,
     index = np.int32 if n < 2**31 else np.int64  # indices wrap silently beyond int32
     dist, nb = np.zeros((n, kq - 1)), np.zeros((n, kq - 1), index)
     for s in range(0, n, QUERY_CHUNK):
-        d, j = tree.query(points[s : s + QUERY_CHUNK], k=kq)
+        d, j = query(tree, points[s : s + QUERY_CHUNK], k=kq)
         dist[s : s + QUERY_CHUNK] = d.reshape(len(d), -1)[:, 1:]
         nb[s : s + QUERY_CHUNK] = j.reshape(len(j), -1)[:, 1:]
     return dist, nb
@@ -218,7 +229,7 @@ def _nearest_pair(points, tree, inside, lab, c):
     own = points[inside]
     if 2 * len(inside) > len(points):  # most of the cloud: ask each outsider for its nearest insider
         outside = np.flatnonzero(lab != c)
-        d, k = cKDTree(own).query(points[outside])
+        d, k = query(cKDTree(own), points[outside])
         r = int(np.argmin(d))
         return inside[k[r : r + 1]], outside[r : r + 1], d[r : r + 1]
     ends = np.unique(np.r_[own.argmin(axis=0), own.argmax(axis=0)])

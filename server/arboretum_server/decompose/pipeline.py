@@ -19,7 +19,7 @@ from scipy.spatial import cKDTree
 from arboretum_library.model import LEAF, WOOD
 from arboretum_library.progress import ProgressFn, no_progress
 
-from .graph import Graph, gap_graph, knn_graph, shortest_paths, weighted
+from .graph import Graph, gap_graph, knn_graph, query, shortest_paths, weighted
 from .grid import BoxGrid
 from .lobes import kmeans
 from .merge import drop, merge_mains, select_mains
@@ -76,7 +76,7 @@ def main_clearance(mains, pts: np.ndarray, tau: float, tree: cKDTree) -> np.ndar
     """
     verts = np.concatenate([mains.reference(b) for b in range(len(mains.full))])  # unsmoothed: on the wood
     r = np.clip(1.3 * np.median(tree.query(verts, k=8)[0], axis=1), 0.004, tau)
-    d, i = cKDTree(verts).query(pts)
+    d, i = query(cKDTree(verts), pts)
     return d > r[i]
 
 
@@ -91,7 +91,7 @@ def bare_trunk(pts: np.ndarray, mains) -> np.ndarray:
     forks = [pv for p, pv in zip(mains.parents, mains.parent_vertex) if p == 0]
     base = min(forks) if forks else len(trunk) - 1
     verts = np.concatenate(mains.segments)
-    d, i = cKDTree(verts).query(pts)
+    d, i = query(cKDTree(verts), pts)
     n = np.bincount(i, minlength=len(verts))
     r = np.bincount(i, weights=d, minlength=len(verts)) / np.maximum(n, 1)
     return (i < base) & (d <= BARE_TRUNK_RADII * r[i])

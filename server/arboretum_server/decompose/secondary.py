@@ -33,7 +33,7 @@ from scipy.spatial import cKDTree
 
 from .carve import part_overlaps, remember_plain, unwrap
 from .clear import bent_fallback, boxes, foreign, inside_foreign, straight_fallback
-from .graph import path_to, shortest_path_to, shortest_paths, weighted
+from .graph import path_to, query, shortest_path_to, shortest_paths, weighted
 from .grid import BoxGrid
 from .lobes import plain_hull
 from .merge import (
@@ -64,7 +64,7 @@ def zone_sources(pts: np.ndarray, members: np.ndarray) -> np.ndarray:
     if len(members) == 0:
         return src
     members = np.sort(members)
-    d, i = cKDTree(pts[members]).query(pts, distance_upper_bound=ZONE_RADIUS)
+    d, i = query(cKDTree(pts[members]), pts, distance_upper_bound=ZONE_RADIUS)
     hit = np.isfinite(d)
     src[hit] = members[i[hit]]
     return src
