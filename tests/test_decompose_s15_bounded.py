@@ -1,7 +1,8 @@
 """Session 15 (helper-119): a rerouted secondary branch needs only the path to its own lobe, so its Dijkstra
 stops at the length of the shared routing's path re-priced on the reroute's graph
-(``graph.shortest_path_to``); where two neighbours give a node of that path the same distance, the full run
-decides. The path must be the full run's, node for node, and so must every decomposition."""
+(``graph.shortest_path_to``). The path must be the full run's, node for node, and so must every
+decomposition; where two neighbours give a node of that path the same distance, the lower-numbered one is
+taken (session 17, ``graph.tied_path``: before, the full run decided)."""
 
 from __future__ import annotations
 
@@ -32,20 +33,33 @@ def _tied_graph(rng: np.random.Generator, n: int):
     return adj
 
 
+def _lowest_tied_path(adj, dist, root, target):
+    """The reference: from ``target`` back to ``root``, each step to the lowest-numbered neighbour whose
+    distance plus edge gives the node's own, on a dense copy of the graph."""
+    a = adj.toarray()
+    out = [target]
+    while out[-1] != root:
+        v = out[-1]
+        out.append(min(u for u in range(len(a)) if a[v, u] > 0 and dist[u] + a[v, u] == dist[v] and dist[u] < dist[v]))
+    return out[::-1]
+
+
 def test_bounded_path_equals_full_run_on_tied_graphs():
     rng = np.random.default_rng(0)
-    checked = 0
+    checked = tied = 0
     for _ in range(200):
         n = int(rng.integers(20, 300))
         adj = _tied_graph(rng, n)
         root = int(rng.integers(n))
-        _, pred = shortest_paths(adj, root)
+        dist, pred = shortest_paths(adj, root)
         for target in rng.integers(0, n, 4).tolist():
-            full = path_to(pred, target)
-            for known in (full, np.array([root, target])):  # a tight bound, and one too short (full run)
-                assert np.array_equal(path_to(shortest_path_to(adj, root, target, known), target), full)
+            want = _lowest_tied_path(adj, dist, root, target)
+            tied += want != path_to(pred, target).tolist()
+            for known in (path_to(pred, target), np.array([root, target])):  # tight, and too short (full run)
+                assert path_to(shortest_path_to(adj, root, target, known), target).tolist() == want
                 checked += 1
     assert checked == 1600
+    assert tied > 50  # Dijkstra's own order took another tied neighbour on many of these paths
 
 
 def _square():
@@ -54,8 +68,7 @@ def _square():
     return coo_matrix((np.r_[w, w], (np.r_[a, b], np.r_[b, a])), shape=(5, 5)).tocsr()
 
 
-def test_a_tie_on_the_path_falls_back_to_the_full_run(monkeypatch):
-    adj = _square()
+def test_a_tie_on_the_path_takes_the_lower_numbered_node_without_a_full_run(monkeypatch):
     limits = []
     plain = graph.dijkstra
 
@@ -64,15 +77,25 @@ def test_a_tie_on_the_path_falls_back_to_the_full_run(monkeypatch):
         return plain(*a, **k)
 
     monkeypatch.setattr(graph, "dijkstra", spy)
-    dist, pred = shortest_paths(adj, 0)
-    assert not path_is_unique(adj, dist, path_to(pred, 3))  # nodes 1 and 2 both give node 3 its distance
-    limits.clear()
-    got = shortest_path_to(adj, 0, 3, path_to(pred, 3))
-    assert limits == [2.0, np.inf]  # bounded at the path's length 2, then the full run
-    assert np.array_equal(path_to(got, 3), path_to(pred, 3))
+    for adj in (_square(), _square()[[0, 2, 1, 3, 4]][:, [0, 2, 1, 3, 4]].tocsr()):  # and with 1 and 2 swapped
+        dist, pred = shortest_paths(adj, 0)
+        assert not path_is_unique(adj, dist, path_to(pred, 3))  # nodes 1 and 2 both give node 3 its distance
+        limits.clear()
+        got = shortest_path_to(adj, 0, 3, path_to(pred, 3))
+        assert limits == [2.0]  # bounded at the path's length 2, and no full run
+        assert path_to(got, 3).tolist() == [0, 1, 3]
     limits.clear()
     got = shortest_path_to(adj, 0, 1, np.array([0, 1]))
     assert limits == [1.0] and got.tolist()[:2] == [-1, 0]
+
+
+def test_a_bound_too_short_runs_in_full_and_an_unreachable_target_is_named():
+    adj = _square()
+    got = shortest_path_to(adj, 0, 4, np.array([0, 4]))  # no such edge: costs 0, below the distance 7
+    assert path_to(got, 4).tolist() == [0, 1, 3, 4]
+    cut = coo_matrix((np.ones(2), ([0, 1], [1, 0])), shape=(3, 3)).tocsr()
+    with pytest.raises(ValueError, match="node 2 is not reachable from node 0"):
+        shortest_path_to(cut, 0, 2, np.array([0, 2]))
 
 
 def test_path_cost_sums_from_the_root_and_bounds_the_distance():

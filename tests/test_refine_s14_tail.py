@@ -43,7 +43,7 @@ def test_foreign_graph_equals_reweighting(leaf_on_pine):
 
     d = leaf_on_pine
     zone = s.zones(d.points, [lb.members for lb in d.lobes])
-    r = s._Route(d.points, d.adjacency, d.root_index, zone, None, None, 0.0, None, None, None, {})
+    r = s._Route(d.points, d.adjacency, d.root_index, zone, None, None, 0.0, None, None, None, {}, None)
     for j in range(len(d.lobes) + 1):
         new, old = s.foreign_graph(r, j), _old_graph(r, j)
         assert np.array_equal(new.indptr, old.indptr) and np.array_equal(new.indices, old.indices)

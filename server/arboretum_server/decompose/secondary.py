@@ -6,15 +6,15 @@ within ``ZONE_RADIUS`` of a lobe's points) made ``ZONE_COST`` times longer, so a
 along the wood and enters foliage only near its target. A secondary branch that still has a vertex
 inside a foreign lobe's hull is routed again on a graph where foreign zones cost ``FOREIGN_COST`` times
 more (one extra Dijkstra per offender, stopped at the length of its first path on that graph, which
-bounds the new one: ``graph.shortest_path_to``, the same path as a full run). If even that path crosses
-(the only wood to the lobe runs through another lobe), the secondary branch becomes a straight segment
-from the nearest main-branch vertex whose segment to the lobe centre stays clear (a deviation from the
-paper, which has no such guarantee), else a two-piece one through one of the lobe's own points. If none
-clears because the main branches there run inside foreign lobes (an alpha shape fills the gap where a main
-branch passes through its foliage: the pine's lobes wrap its trunk), those lobes are rebuilt with the main
-branches carved out (``unwrap``) and both repairs are tried again; if still none clears, the last step of
-``make_lobes`` (``tunnel.behind``) carves the branch a way through the other new lobes, or moves its
-lobe's centre.
+bounds the new one: ``graph.shortest_path_to``, the same path as a full run, ties broken by node
+number). If even that path crosses (the only wood to the lobe runs through another lobe), the secondary
+branch becomes a straight segment from the nearest main-branch vertex whose segment to the lobe centre
+stays clear (a deviation from the paper, which has no such guarantee), else a two-piece one through one of
+the lobe's own points. If none clears because the main branches there run inside foreign lobes (an alpha
+shape fills the gap where a main branch passes through its foliage: the pine's lobes wrap its trunk), those
+lobes are rebuilt with the main branches carved out (``unwrap``) and both repairs are tried again; if still
+none clears, the last step of ``make_lobes`` (``tunnel.behind``) carves the branch a way through the other
+new lobes, or moves its lobe's centre.
 
 Every secondary branch is smoothed (smooth.py, ours) with its connection point on the main branch and its
 tip at the lobe centre fixed; where the smoothed curve would enter a foreign lobe and the unsmoothed
@@ -199,9 +199,8 @@ class _Route(NamedTuple):
     tree: cKDTree
     cache: dict
     """The per-edge zone weights of ``foreign_graph``, built at the first reroute of a ``make_lobes`` call."""
-    pred: np.ndarray | None = None
-    """(N,) the shared routing's predecessors: its path to a lobe bounds that lobe's reroute (None: a full
-    Dijkstra per reroute)."""
+    pred: np.ndarray
+    """(N,) the shared routing's predecessors: its path to a lobe bounds that lobe's reroute."""
 
 
 def _edge_zones(adjacency: csr_matrix, zone: np.ndarray) -> tuple[csr_matrix, np.ndarray, np.ndarray]:
@@ -236,10 +235,7 @@ def _reroute(lobes: list[LobeState], j: int, target: int, r: _Route, box):
     lobes' boxes returned, new when a carving changed a hull)."""
     lb, o = lobes[j], r.o
     graph = foreign_graph(r, j)
-    if r.pred is None:
-        p2 = shortest_paths(graph, r.root)[1]
-    else:
-        p2 = shortest_path_to(graph, r.root, target, path_to(r.pred, target))
+    p2 = shortest_path_to(graph, r.root, target, path_to(r.pred, target))
     path = branch_paths([target], p2, r.pts, r.grid, o.step)
     seg, parent, pv = merge_secondaries(path, r.mains, r.tau, o.resample, o.sc_bins, r.refs)[0]
     seg = _finish(seg, lb.centre)
