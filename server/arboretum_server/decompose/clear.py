@@ -104,18 +104,41 @@ def straight_fallback(lobes: list[LobeState], j: int, mains: BranchSet, tries: i
     lobe centre stays out of foreign lobes (candidates tested ``batch`` at a time, nearest first), or None."""
     centre = lobes[j].centre
     verts, owner = main_vertices(mains)
-    dist = np.linalg.norm(verts - centre, axis=1)
-    order = np.array([i for i in np.argsort(dist)[:tries] if dist[i] > 1e-9], dtype=int)
+    order = _nearest_vertices(verts, centre, tries)
     box = boxes(lobes)
     for start in range(0, len(order), batch):
         cand = order[start : start + batch]
         bad = _blocked(lobes, j, verts[cand], np.broadcast_to(centre, (len(cand), 3)), step, box)
         if not bad.all():
             i = int(cand[int(np.argmin(bad))])
-            m = max(2, int(np.ceil(dist[i] / 0.01)) + 1)
-            seg = verts[i] + np.linspace(0.0, 1.0, m)[:, None] * (centre - verts[i])
-            return seg, int(owner[i, 0]), int(owner[i, 1])
+            return _straight(verts[i], centre, owner[i])
     return None
+
+
+def straight_routes(lobes: list[LobeState], j: int, mains: BranchSet, tries: int = 64,
+                    step: float = 0.005) -> list[tuple[np.ndarray, int, int]]:
+    """Every straight branch ``straight_fallback`` could give lobe ``j``: from each of the ``tries`` main-branch
+    vertices nearest its centre whose segment stays out of foreign lobes, nearest first (the last resort
+    ``tunnel.behind`` chooses among them)."""
+    centre = lobes[j].centre
+    verts, owner = main_vertices(mains)
+    order = _nearest_vertices(verts, centre, tries)
+    if not len(order):
+        return []
+    bad = _blocked(lobes, j, verts[order], np.broadcast_to(centre, (len(order), 3)), step, boxes(lobes))
+    return [_straight(verts[i], centre, owner[i]) for i in order[~bad]]
+
+
+def _nearest_vertices(verts: np.ndarray, centre: np.ndarray, tries: int) -> np.ndarray:
+    """Indices of the ``tries`` vertices nearest ``centre``, nearest first, the centre itself left out."""
+    dist = np.linalg.norm(verts - centre, axis=1)
+    return np.array([i for i in np.argsort(dist)[:tries] if dist[i] > 1e-9], dtype=int)
+
+
+def _straight(start: np.ndarray, centre: np.ndarray, owner: np.ndarray) -> tuple[np.ndarray, int, int]:
+    """The segment ``start`` -> ``centre`` every <= 1 cm, with the (branch, vertex) it leaves from."""
+    m = max(2, int(np.ceil(np.linalg.norm(centre - start) / 0.01)) + 1)
+    return start + np.linspace(0.0, 1.0, m)[:, None] * (centre - start), int(owner[0]), int(owner[1])
 
 
 def _blocked(lobes: list[LobeState], j: int, a: np.ndarray, b: np.ndarray, step: float,

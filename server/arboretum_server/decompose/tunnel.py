@@ -1,8 +1,9 @@
 """Last resorts for a lobe whose secondary branch still crosses another lobe after every repair of
 ``secondary.make_lobes`` (ours; VRTree has no such guarantee): a straight or bent branch carved through
-the lobes in its way (``behind``, ``carve_route``), else the lobe's centre moved to one of its own points
-that a straight branch reaches clear (``moved_centre``). ``make_lobes`` runs them last, on the lobes it
-makes: a refinement's new lobes, or every lobe of a decomposition.
+the lobes in its way, the straight one through the fewest (``behind``, ``_routes``, ``carve_route``),
+else the lobe's centre moved to one of its own points that a straight branch reaches clear
+(``moved_centre``). ``make_lobes`` runs them last, on the lobes it makes: a refinement's new lobes, or
+every lobe of a decomposition.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from dataclasses import replace
 import numpy as np
 
 from .carve import carve_lobe
-from .clear import bent_fallback, boxes, foreign, inside_foreign, straight_fallback
+from .clear import bent_fallback, boxes, foreign, inside_foreign, straight_fallback, straight_routes
 from .lobes import inside
 from .merge import BranchSet, resample_step, sample_polylines
 from .options import DecomposeOptions
@@ -29,8 +30,9 @@ def enters(lb: LobeState, wood: np.ndarray) -> bool:
 def behind(lobes: list[LobeState], n_kept: int, pts: np.ndarray, mains: BranchSet, o: DecomposeOptions,
            step: float = 0.0025) -> int:
     """A new lobe (index >= ``n_kept``) whose own branch still crosses a lobe (no repair of ``make_lobes``
-    cleared it) gets the straight or bent repair among the kept lobes alone, and the other new lobes in
-    its way are carved out of it, when that clears it (in place; else its centre moves, ``moved_centre``).
+    cleared it) gets a straight or bent repair among the kept lobes alone (``_routes``: the straight ones
+    through the fewest other new lobes first), and the other new lobes in its way are carved out of it,
+    when that clears it (in place; else its centre moves, ``moved_centre``).
     Returns how many lobes it was asked to clear.
 
     In a refinement such a lobe lies behind another new one: the outer part of a lobe that was inserted or
@@ -48,11 +50,28 @@ def behind(lobes: list[LobeState], n_kept: int, pts: np.ndarray, mains: BranchSe
         if not foreign(lobes, j, lobes[j].segment, tol, boxes(lobes)):
             continue
         asked += 1
-        sub = [*lobes[:n_kept], lobes[j]]
-        route = straight_fallback(sub, n_kept, mains) or bent_fallback(sub, n_kept, mains, pts)
-        if route is None or not carve_route(lobes, n_kept, j, route, pts, o, step):
+        if not any(carve_route(lobes, n_kept, j, route, pts, o, step)
+                   for route in _routes(lobes, n_kept, j, pts, mains, step)):
             moved_centre(lobes, j, pts, mains)
     return asked
+
+
+ROUTES_TRIED = 4
+"""``behind`` tries to carve at most this many straight routes before the bent one."""
+
+
+def _routes(lobes: list[LobeState], n_kept: int, j: int, pts: np.ndarray, mains: BranchSet, step: float):
+    """Routes for new lobe ``j`` clear of the kept lobes, in the order ``behind`` carves them: the straight
+    ones through the fewest other new lobes (the nearest first among equals; before session 17, the nearest
+    alone), then the bent one when no straight route is clear."""
+    sub = [*lobes[:n_kept], lobes[j]]
+    straight = straight_routes(sub, n_kept, mains)
+    others = [k for k in range(n_kept, len(lobes)) if k != j]
+    woods = [sample_polylines([r[0]], step) for r in straight]
+    in_way = [sum(enters(lobes[k], wood) for k in others) for wood in woods]
+    yield from [straight[i] for i in np.argsort(in_way, kind="stable")[:ROUTES_TRIED]]
+    if not straight and (bent := bent_fallback(sub, n_kept, mains, pts)) is not None:
+        yield bent
 
 
 def carve_route(lobes: list[LobeState], n_kept: int, j: int, route: tuple[np.ndarray, int, int],
