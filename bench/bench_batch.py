@@ -49,6 +49,18 @@ def _single_scan_seconds(paths: list[Path], lib_path: Path) -> tuple[float, floa
 
 
 def run() -> list[Row]:
+    """The rows, with the process environment as it was: ``decompose_scan`` gives the process it runs in a
+    batch worker's thread settings (``OMP_NUM_THREADS`` = 1, which caps ``graph.query`` too), and the
+    benchmarks after this one run in the same process."""
+    saved = dict(os.environ)
+    try:
+        return _rows()
+    finally:
+        os.environ.clear()
+        os.environ.update(saved)
+
+
+def _rows() -> list[Row]:
     from arboretum_server.batch.build import BuildOptions, build_library
     from arboretum_server.batch.synthetic import synthetic_scans
 

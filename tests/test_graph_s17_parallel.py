@@ -40,3 +40,27 @@ def test_knn_graph_the_same_either_side_of_the_threshold(monkeypatch):
     assert parallel.bridges == serial.bridges
     assert (parallel.adjacency != serial.adjacency).nnz == 0
     np.testing.assert_array_equal(parallel.neighbours, serial.neighbours)
+
+
+class _Recorder:
+    """A stand-in KD-tree that records the ``workers`` it was asked with."""
+
+    def __init__(self) -> None:
+        self.workers: list[int] = []
+
+    def query(self, q, workers=1, **kw):
+        self.workers.append(workers)
+        return np.zeros(len(q)), np.zeros(len(q), int)
+
+
+def test_threads_follow_omp_num_threads(monkeypatch):
+    big, small = np.zeros((graph.PARALLEL_MIN, 3)), np.zeros((10, 3))
+    tree = _Recorder()
+    for value, want in (("1", 1), ("3", 3), ("0", -1), ("many", -1), ("", -1)):
+        monkeypatch.setenv("OMP_NUM_THREADS", value)
+        graph.query(tree, big)
+        graph.query(tree, small)
+        assert tree.workers[-2:] == [want, 1]
+    monkeypatch.delenv("OMP_NUM_THREADS")
+    graph.query(tree, big)
+    assert tree.workers[-1] == -1

@@ -4,13 +4,14 @@ An edge weighs its length once for each of its two points that lists the other a
 (``_edges`` sums both directions): a mutual neighbour pair weighs twice its length, a one-sided pair
 once, where the paper's Euclidean weights would be once for both (measured and kept:
 docs/decomposition-experiments.md). A K = 5 graph of a real tree falls apart into components
-(FACTS.md); we join them into one with bridges (``_bridges``: a minimum spanning tree over components
+(`stats.components`: 2-50 on the bundled scans); we join them into one with bridges (``_bridges``: a minimum spanning tree over components
 of the shortest candidate edge between each two) and report how many we added. Shortest paths from the
 root use Dijkstra.
 """
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -58,8 +59,16 @@ the same answer; below, starting the threads costs more than it saves)."""
 
 def query(tree: cKDTree, q: np.ndarray, **kw) -> tuple[np.ndarray, np.ndarray]:
     """``tree.query(q, **kw)`` on every core for ``PARALLEL_MIN`` points or more: the whole-cloud queries of a
-    ``--points 0`` run (a million points' 17 nearest: 4.7 s on one core, 2.7 s on this machine's two)."""
-    return tree.query(q, workers=-1 if len(q) >= PARALLEL_MIN else 1, **kw)
+    ``--points 0`` run (a million points' 17 nearest: 4.7 s on one core, 2.7 s on this machine's two).
+    ``OMP_NUM_THREADS``, when set, caps the threads as it does the BLAS's: a batch worker sets it to 1, its
+    parallelism coming from processes (docs/batch.md)."""
+    return tree.query(q, workers=query_threads() if len(q) >= PARALLEL_MIN else 1, **kw)
+
+
+def query_threads() -> int:
+    """Threads for a whole-cloud query: ``OMP_NUM_THREADS`` when it is a whole number >= 1, else -1 (every core)."""
+    value = os.environ.get("OMP_NUM_THREADS", "").strip()
+    return int(value) if value.isdigit() and int(value) >= 1 else -1
 
 
 QUERY_CHUNK = 1 << 16
@@ -334,8 +343,8 @@ def tied_path(adj: csr_matrix, dist: np.ndarray, root: int, target: int) -> np.n
     """Node indices (M,) root -> ``target`` stepping back, at each node ``v``, to the lowest-numbered neighbour
     ``u`` with ``dist[u] + w == dist[v]`` (as Dijkstra adds them) and ``dist[u] < dist[v]``: one shortest path
     whatever order Dijkstra settled tied nodes in, so a bounded run and a full run give the same. Real scans
-    lie on a 1 mm grid and tie often (10 of 122 reroutes at 12,000 points, all 19 of scan 10 at full
-    resolution); before session 17 each such reroute paid a second, full run. None when a step finds no such
+    lie on a 1 mm grid and tie often (10 of the four scans' 80 reroutes at 12,000 points, all 19 of scan
+    10 at full resolution); before session 17 each such reroute paid a second, full run. None when a step finds no such
     neighbour (``dist`` not from ``adj``)."""
     indptr, indices, data = adj.indptr, adj.indices, adj.data
     out, v = [int(target)], int(target)
