@@ -36,7 +36,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--points", type=int, default=12000, metavar="N", help="downsample to N points (0: all)")
     p.add_argument("--height", type=float, default=0.8, metavar="M",
                    help="output height in metres (0: keep the scan's units and position)")
-    p.add_argument("--seed", type=int, default=0, help="seed for downsampling, FPS and k-means")
+    p.add_argument("--seed", type=int, default=0, help="seed for downsampling and k-means")
     p.add_argument("--reach-weight", type=float, default=None, metavar="W",
                    help="main branches: score reach^W x spread^(1-W); 0 for conifers (default: 0 for pine, "
                         "0.5 otherwise)")

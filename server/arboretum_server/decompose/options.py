@@ -136,7 +136,8 @@ class DecomposeOptions:
     pipe_exponent: float = 2.0
     """Pipe-model exponent: r_parent^e = sum r_child^e (2 = da Vinci)."""
     seed: int = 0
-    """Seed of the numpy Generator for downsampling, FPS start and k-means."""
+    """Seed of the numpy Generator for downsampling and k-means (farthest-point sampling starts at the root and
+    draws nothing; the ground search and the base-band subsample use their own fixed seed)."""
 
     def __post_init__(self) -> None:
         check_options(self)

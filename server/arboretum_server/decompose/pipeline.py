@@ -1,11 +1,12 @@
 """``decompose``: a point cloud to a whole-tree HBL (VRTree section 3.4, Fig. 4, Appendix A).
 
-Steps (each timed in ``Decomposition.timing``): prepare (repeated points merged, strays and ground
-left out, downsample, root, scale) -> graph (kNN K=5 within r=0.05, bridged) -> separate (leaf/wood, on
-the graph's neighbours) -> mains (Dijkstra from the root, FPS endpoints, shortest paths, Algorithm 1
-step 1, smoothing) -> lobes (bare trunk to wood, foliage points, k-means into N_l clusters) -> secondary
-(alpha shapes, shortest paths to the lobe centres, Algorithm 1 step 2, Eq. 1, smoothing) -> hbl
-(pipe-model radii, records).
+Steps (each timed in ``Decomposition.timing``): prepare (repeated points merged, ground cut, downsample,
+strays left out, root and trunk columns, scale) -> graph (kNN K=5 within r=0.05, bridged) -> separate
+(leaf/wood, on the graph's neighbours) -> mains (Dijkstra from the root, FPS endpoints, shortest paths,
+hooked ones rerouted across scan gaps, selection, Algorithm 1 step 1, smoothing) -> lobes (bare trunk
+to wood, foliage points, k-means into N_l clusters) -> secondary (alpha shapes, shortest paths to the
+lobe centres, Algorithm 1 step 2, Eq. 1, smoothing, repairs of branches entering foreign lobes:
+rerouting, straight and bent, carving, ``tunnel.behind``) -> hbl (pipe-model radii, records).
 """
 
 from __future__ import annotations

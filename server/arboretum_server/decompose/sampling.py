@@ -8,7 +8,8 @@ import numpy as np
 def farthest_points(points: np.ndarray, n: int, start: int) -> np.ndarray:
     """Indices (min(n, N),) of ``n`` farthest-point samples of ``points`` (N, 3), starting at ``start``.
 
-    Uses fpsample's bucket k-d line sampler (QuickFPS), 10-60x faster than a numpy loop (FACTS.md).
+    Uses fpsample's bucket k-d line sampler (QuickFPS), 10-60x faster than a numpy loop (the benchmark's FPS row:
+    evaluation.md, Speed).
     fpsample 1.0.2's bucket samplers do not keep ``start`` among the samples (measured); coverage is
     the same as the reference loop's within a few percent. Callers that must not get ``start`` back
     filter it out.
