@@ -1,6 +1,10 @@
 """The whole-cloud KD-tree queries run on every core past ``graph.PARALLEL_MIN`` points, with the same answer."""
 
+import signal
+import threading
+
 import numpy as np
+import pytest
 from scipy.spatial import cKDTree
 
 from arboretum_server.decompose import graph
@@ -43,13 +47,16 @@ def test_knn_graph_the_same_either_side_of_the_threshold(monkeypatch):
 
 
 class _Recorder:
-    """A stand-in KD-tree that records the ``workers`` it was asked with."""
+    """A stand-in KD-tree that records the ``workers`` it was asked with, and can send itself a SIGINT."""
 
-    def __init__(self) -> None:
+    def __init__(self, interrupt: bool = False) -> None:
         self.workers: list[int] = []
+        self.interrupt = interrupt
 
     def query(self, q, workers=1, **kw):
-        self.workers.append(workers)
+        if self.interrupt:
+            signal.raise_signal(signal.SIGINT)
+        self.workers.append(workers)  # reached: the signal did not cut the query short
         return np.zeros(len(q)), np.zeros(len(q), int)
 
 
@@ -64,3 +71,36 @@ def test_threads_follow_omp_num_threads(monkeypatch):
     monkeypatch.delenv("OMP_NUM_THREADS")
     graph.query(tree, big)
     assert tree.workers[-1] == -1
+
+
+def test_a_ctrl_c_during_a_parallel_query_waits_for_its_end(monkeypatch):
+    """scipy's worker threads ran on after a Ctrl-C ended the wait for them, and the interpreter crashed
+    shutting down under them: the interrupt now comes after the query, to the handler that was there."""
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    before = signal.getsignal(signal.SIGINT)
+    tree = _Recorder(interrupt=True)
+    with pytest.raises(KeyboardInterrupt):
+        graph.query(tree, np.zeros((graph.PARALLEL_MIN, 3)))
+    assert tree.workers == [-1] and signal.getsignal(signal.SIGINT) is before
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a handler that ignores it still does
+    try:
+        graph.query(tree, np.zeros((graph.PARALLEL_MIN, 3)))
+        assert tree.workers == [-1, -1] and signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, before)
+
+
+def test_a_query_off_the_main_thread_leaves_signals_alone(monkeypatch):
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    tree, errors = _Recorder(), []
+
+    def run():
+        try:
+            graph.query(tree, np.zeros((graph.PARALLEL_MIN, 3)))
+        except Exception as exc:  # signal.signal off the main thread would raise ValueError
+            errors.append(exc)
+
+    t = threading.Thread(target=run)
+    t.start()
+    t.join()
+    assert errors == [] and tree.workers == [-1]

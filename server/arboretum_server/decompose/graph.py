@@ -12,12 +12,17 @@ root use Dijkstra.
 from __future__ import annotations
 
 import os
+import signal
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra, minimum_spanning_tree
 from scipy.spatial import cKDTree
+
+from arboretum_library.signals import held
 
 CANDIDATES = 16
 """Neighbours queried per point for bridging candidates (beyond the K graph neighbours)."""
@@ -59,10 +64,30 @@ the same answer; below, starting the threads costs more than it saves)."""
 
 def query(tree: cKDTree, q: np.ndarray, **kw) -> tuple[np.ndarray, np.ndarray]:
     """``tree.query(q, **kw)`` on every core for ``PARALLEL_MIN`` points or more: the whole-cloud queries of a
-    ``--points 0`` run (a million points' 17 nearest: 4.7 s on one core, 2.7 s on this machine's two).
-    ``OMP_NUM_THREADS``, when set, caps the threads as it does the BLAS's: a batch worker sets it to 1, its
-    parallelism coming from processes (docs/batch.md)."""
-    return tree.query(q, workers=query_threads() if len(q) >= PARALLEL_MIN else 1, **kw)
+    ``--points 0`` run (a million points' 17 nearest: 3.2-4.7 s on one core, 1.6-2.7 s on this machine's
+    two). ``OMP_NUM_THREADS``, when set, caps the threads as it does the BLAS's: a batch worker sets it to
+    1, its parallelism coming from processes (docs/batch.md).
+
+    A Ctrl-C waits for the query to end (``_interrupt_after``): scipy's worker threads would otherwise run on
+    while the interpreter shut down under them, a segmentation fault in 4 of 26 interrupts of a
+    738,510-point decomposition (session 17). The wait is short: the graph asks 65,536 points at a time, and
+    the longest call, a million points' nearest lobe point, takes 0.5 s.
+    """
+    threads = query_threads() if len(q) >= PARALLEL_MIN else 1
+    if threads == 1:
+        return tree.query(q, **kw)
+    with _interrupt_after():
+        return tree.query(q, workers=threads, **kw)
+
+
+@contextmanager
+def _interrupt_after() -> Iterator[None]:
+    """A SIGINT that arrives in the block is held and raised again when the block ends, to whatever
+    handler was there (Python's: ``KeyboardInterrupt``)."""
+    with held(signal.SIGINT) as got:
+        yield
+    if got:
+        signal.raise_signal(signal.SIGINT)
 
 
 def query_threads() -> int:
