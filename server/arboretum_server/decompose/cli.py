@@ -8,6 +8,9 @@ A scan already in LIB (the same bytes, decomposed with the same options) is not 
 names the examples there and stores nothing; --rebuild decomposes it again and replaces them (as
 ``arboretum library build --rebuild`` does).
 
+Ctrl-C (exit 130) or SIGTERM (exit 143) takes back what the run stored and removes a library it created;
+one that comes after the examples are committed waits for the report, and the run exits 0.
+
 A sparse cloud (a photo reconstruction keeps about 120 tree points) needs a lower --min-points and
 small --main and --lobes (at most a tenth of the points): ``--min-points 100 --main 3 --lobes 8``.
 """
@@ -17,13 +20,15 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
+import signal
 import time
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import replace
 
 from arboretum_library.checks import check_height, check_seed
 from arboretum_library.cli import add_json_flag, counted, emit, tell
 from arboretum_library.pointio import UP_CHOICES
+from arboretum_library.signals import held
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -109,6 +114,21 @@ def _check_usable(scan: str, cloud, options) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """The command; SIGTERM stops it as Ctrl-C does (what the run stored is taken back, a library it created
+    removed), then exits 143 (128 + SIGTERM) with one line, as ``library build`` does."""
+    import sys
+
+    from arboretum_server.batch.signals import Terminated, sigterm_stops
+
+    with sigterm_stops():
+        try:
+            return _run(args)
+        except Terminated:
+            print(f"arboretum {args.command}: interrupted (SIGTERM)", file=sys.stderr, flush=True)
+            return 143
+
+
+def _run(args: argparse.Namespace) -> int:
     from arboretum_library.outputs import check_output
     from arboretum_library.pointio import ReadOptions, precision_note, read_points
     from arboretum_library.progress import StatusLine
@@ -128,22 +148,28 @@ def run(args: argparse.Namespace) -> int:
     prov = provenance(args.scan, options, sha256=file_sha256(args.scan))
     prov = replace(prov, parameters={**prov.parameters, UP_AXIS_KEY: cloud.up_axis})  # --up y is another tree
     status = StatusLine() if not args.json else (lambda *a: None)
-    with _library(args.library) as lib:  # opened first: a library that cannot be written fails before the work
-        there, other = _stored(lib, prov)
-        if there and not args.rebuild and not args.save_hbl:  # nothing to do: no decomposition either
-            data = _result(args, options, len(cloud.points), {"read": t_read}, None, ([], [], there), other)
-            data["notes"] += [surplus] if (surplus := _surplus(lib, there)) else []
-            emit(args, data, _text(data))
-            return 0
-        coarse = precision_note(cloud, points=options.points)  # float32 at UTM: the points sit on a 0.5 m grid
-        dec = _decompose(args.scan, cloud, options, status, coarse)
-        if args.save_hbl:
-            _save_hbl(args.save_hbl, dec.hbl)
-        stored = _store(lib, dec, args.scan, prov, args.rebuild)
-    data = _result(args, options, len(cloud.points), {"read": t_read, **dec.timing}, dec, stored, other)
-    bare = bare_note(stored[0], named=bool(stored[1]))  # library ids name them; example-000 would not
-    data["notes"] = ([coarse] if coarse else []) + notes(options, dec.stats) + data["notes"] + ([bare] if bare else [])
-    emit(args, data, _text(data))
+    with ExitStack() as done:
+        with _library(args.library) as lib:  # opened first: a library that cannot be written fails before the work
+            there, other = _stored(lib, prov)
+            if there and not args.rebuild and not args.save_hbl:  # nothing to do: no decomposition either
+                data = _result(args, options, len(cloud.points), {"read": t_read}, None, ([], [], there), other)
+                data["notes"] += [surplus] if (surplus := _surplus(lib, there)) else []
+                emit(args, data, _text(data))
+                return 0
+            coarse = precision_note(cloud, points=options.points)  # float32 at UTM: the points sit on a 0.5 m grid
+            dec = _decompose(args.scan, cloud, options, status, coarse)
+            if args.save_hbl:
+                _save_hbl(args.save_hbl, dec.hbl)
+            stored = _store(lib, dec, args.scan, prov, args.rebuild)
+            # stored and committed: the run is done, a Ctrl-C or SIGTERM from here on only waits for the report
+            late = done.enter_context(held(signal.SIGINT, signal.SIGTERM))
+        data = _result(args, options, len(cloud.points), {"read": t_read, **dec.timing}, dec, stored, other)
+        bare = bare_note(stored[0], named=bool(stored[1]))  # library ids name them; example-000 would not
+        data["notes"] = ([coarse] if coarse else []) + notes(options, dec.stats) + data["notes"] + ([bare] if bare else [])
+        emit(args, data, _text(data))
+    if late:
+        tell(f"arboretum {args.command}: {'Ctrl-C' if late[0] == signal.SIGINT else 'SIGTERM'} came after the "
+             "run had finished: its result stands")
     return 0
 
 
