@@ -223,7 +223,8 @@ class Provenance:
     source: str
     """The source scan's file name, or ``synthetic:MODEL:SPECIES:SEED``, or ``sketch``."""
     source_sha256: str = ""
-    """Hex SHA-256 of the source file's bytes ('' when not from a file)."""
+    """Hex SHA-256 of the source file's bytes, or of the points of a service ``library.import`` ('' for
+    neither)."""
     species: str = "unknown"
     """Species name in lower case."""
     parameters: Mapping[str, Any] = field(default_factory=dict)

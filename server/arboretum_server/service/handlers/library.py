@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 from typing import Any
 
 import numpy as np
@@ -87,15 +88,44 @@ def import_job(progress, library_path: str, points: np.ndarray, labels: np.ndarr
     from arboretum_server.decompose.pipeline import decompose
 
     opts = options_from(species, options)
+    prov = Provenance(name, points_sha256(points, labels), opts.species, opts.as_dict())
+    with Library.open(library_path) as lib:  # a retried request (a client's timeout) finds its examples there
+        if there := _already(lib, prov):
+            return there
     dec = decompose(points, opts, progress, labels=labels)
     said = notes(opts, dec.stats)  # before anything is stored
-    prov = Provenance(name, "", opts.species, opts.as_dict())
     stem = "".join(c if c.isalnum() or c in "-_" else "-" for c in name)[:60] or "scan"
     with Library.open(library_path) as lib:  # made by import_scan (ctx.library()): a library gone meanwhile stays gone
-        examples = lib.add_new(make_examples(dec.hbl, prov), stem)  # ids picked under the lock
+        with lib.locked():  # checked again: the same request may have been stored while this one decomposed
+            if there := _already(lib, prov):
+                return there
+            examples = lib.add_new(make_examples(dec.hbl, prov), stem)  # ids picked under the lock
     if bare := bare_note(examples, named=True):
         said = [*said, bare]
     return {"ids": [e.id for e in examples], "stats": dec.stats, "notes": said}
+
+
+def points_sha256(points: np.ndarray, labels: np.ndarray | None) -> str:
+    """Hex SHA-256 of a request's points (as little-endian float64) and labels: an import's source digest,
+    as a file's bytes are the CLI's, so the same points sent again are known."""
+    h = hashlib.sha256(np.ascontiguousarray(points, "<f8").tobytes())
+    if labels is not None:
+        h.update(np.ascontiguousarray(labels, "|u1").tobytes())
+    return h.hexdigest()
+
+
+def _already(lib, prov) -> dict | None:
+    """The reply for points already imported with the same name, species and options (nothing stored), or
+    None. Before session 17 every retry stored the examples again."""
+    from arboretum_server.decompose.examples import split_runs
+
+    same = [i for i in split_runs(lib, sorted(lib.find_source(prov.source_sha256)), prov)[0]
+            if lib.provenance(i).source == prov.source]
+    if not same:
+        return None
+    return {"ids": [], "stats": {}, "notes": [f"already in the library as ids {', '.join(same[:8])}"
+                                              f"{', ...' if len(same) > 8 else ''} (these points, imported with "
+                                              "the same options): nothing stored"]}
 
 
 def import_scan(ctx: Context, req: P.LibraryImport) -> Job:
