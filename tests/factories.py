@@ -321,3 +321,17 @@ def float32_ply(path: Path, pts: np.ndarray) -> Path:
             "property float x\nproperty float y\nproperty float z\nend_header\n")
     path.write_bytes(head.encode() + body.tobytes())
     return path
+
+
+def hbl_arrays(d) -> list:
+    """Every array of decomposition ``d``'s HBL (points, labels, branches, lobes and hulls), in order: two
+    decompositions are the same when these are equal one by one."""
+    import numpy as np
+
+    hbl = d.hbl
+    out = [hbl.points, hbl.labels]
+    for b in hbl.branches:
+        out += [b.points, b.radii, np.array([b.parent, b.parent_vertex])]
+    for lb in hbl.lobes:
+        out += [lb.points, lb.hull_vertices, lb.hull_faces, lb.centre, np.array([lb.branch])]
+    return out

@@ -18,6 +18,7 @@ from arboretum_server.decompose.graph import (
     shortest_path_to,
     shortest_paths,
 )
+from factories import hbl_arrays
 
 
 def _tied_graph(rng: np.random.Generator, n: int):
@@ -129,16 +130,6 @@ def pine_points():
     return pts
 
 
-def _arrays(d):
-    hbl = d.hbl
-    out = [hbl.points, hbl.labels]
-    for b in hbl.branches:
-        out += [b.points, b.radii, np.array([b.parent, b.parent_vertex])]
-    for lb in hbl.lobes:
-        out += [lb.points, lb.hull_vertices, lb.hull_faces, lb.centre, np.array([lb.branch])]
-    return out
-
-
 def test_reroutes_are_bounded_and_change_nothing(pine_points, monkeypatch):
     """The leaf-on pine reroutes 36 branches: each Dijkstra is bounded (finite limit, fewer points settled
     than the 12,000 of a full run), and the decomposition equals the one with a full run per reroute."""
@@ -163,4 +154,4 @@ def test_reroutes_are_bounded_and_change_nothing(pine_points, monkeypatch):
     assert sum(s for _, s, _ in reroutes) < 0.7 * sum(n for _, _, n in reroutes)
     monkeypatch.setattr(secondary, "shortest_path_to", lambda adj, root, target, known: shortest_paths(adj, root)[1])
     full = decompose(pine_points, DecomposeOptions(species="pine"))
-    assert all(np.array_equal(a, b) for a, b in zip(_arrays(bounded), _arrays(full), strict=True))
+    assert all(np.array_equal(a, b) for a, b in zip(hbl_arrays(bounded), hbl_arrays(full), strict=True))

@@ -8,21 +8,12 @@ import numpy as np
 import pytest
 
 from arboretum_server.decompose import graph
+from factories import hbl_arrays
 
 
 @pytest.fixture(scope="module")
 def scan06(scans_dir):
     return np.loadtxt(scans_dir / "06_adtree_tree7" / "06_adtree_tree7.xyz")[:, :3]
-
-
-def _arrays(d):
-    hbl = d.hbl
-    out = [hbl.points, hbl.labels]
-    for b in hbl.branches:
-        out += [b.points, b.radii, np.array([b.parent, b.parent_vertex])]
-    for lb in hbl.lobes:
-        out += [lb.points, lb.hull_vertices, lb.hull_faces, lb.centre, np.array([lb.branch])]
-    return out
 
 
 def test_tied_reroutes_of_a_real_scan_stay_bounded_and_match_full_runs(scan06, monkeypatch):
@@ -49,7 +40,7 @@ def test_tied_reroutes_of_a_real_scan_stay_bounded_and_match_full_runs(scan06, m
     assert unique.count(False) >= 5  # though several met a tie on their path
     monkeypatch.setattr(graph, "path_cost", lambda adj, known: np.inf)  # every reroute a full run
     full = decompose(scan06, DecomposeOptions())
-    assert all(np.array_equal(a, b) for a, b in zip(_arrays(bounded), _arrays(full), strict=True))
+    assert all(np.array_equal(a, b) for a, b in zip(hbl_arrays(bounded), hbl_arrays(full), strict=True))
 
 
 def test_tied_path_walks_to_the_lowest_numbered_tied_neighbour():
