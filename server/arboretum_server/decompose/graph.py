@@ -4,9 +4,9 @@ An edge weighs its length once for each of its two points that lists the other a
 (``_edges`` sums both directions): a mutual neighbour pair weighs twice its length, a one-sided pair
 once, where the paper's Euclidean weights would be once for both (measured and kept:
 docs/decomposition-experiments.md). A K = 5 graph of a real tree falls apart into components
-(`stats.components`: 2-50 on the bundled scans); we join them into one with bridges (``_bridges``: a minimum spanning tree over components
-of the shortest candidate edge between each two) and report how many we added. Shortest paths from the
-root use Dijkstra.
+(``stats.components``: 2-50 on the bundled scans); we join them into one with bridges (``_bridges``: a
+minimum spanning tree over components of the shortest candidate edge between each two) and report how
+many we added. Shortest paths from the root use Dijkstra.
 """
 
 from __future__ import annotations
@@ -369,8 +369,8 @@ def tied_path(adj: csr_matrix, dist: np.ndarray, root: int, target: int) -> np.n
     ``u`` with ``dist[u] + w == dist[v]`` (as Dijkstra adds them) and ``dist[u] < dist[v]``: one shortest path
     whatever order Dijkstra settled tied nodes in, so a bounded run and a full run give the same. Real scans
     lie on a 1 mm grid and tie often (10 of the four scans' 80 reroutes at 12,000 points, all 19 of scan
-    10 at full resolution); before session 17 each such reroute paid a second, full run. None when a step finds no such
-    neighbour (``dist`` not from ``adj``)."""
+    10 at full resolution); before session 17 each such reroute paid a second, full run. None when a step
+    finds no such neighbour (``dist`` not from ``adj``)."""
     indptr, indices, data = adj.indptr, adj.indices, adj.data
     out, v = [int(target)], int(target)
     while v != root:

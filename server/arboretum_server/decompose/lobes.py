@@ -3,9 +3,10 @@
 The alpha shape is built from the Delaunay tetrahedralisation of the cluster: tetrahedra whose
 circumradius is below the probe radius are kept, and the hull is the set of triangles that belong to
 exactly one kept tetrahedron, each oriented away from its tetrahedron. Such a boundary is closed, unlike
-open3d's alpha meshes of surface-like clusters (a measurement kept outside the repository), but can pinch or fall apart, so the probe
-radius 1/alpha (0.8 m frame) is tried at each of ``RADIUS_STEPS`` times itself, and the first shape that
-touches at least ``MIN_COVER`` of the cluster's points and is a closed, one-piece 2-manifold is taken.
+open3d's alpha meshes of surface-like clusters (a measurement kept outside the repository), but can
+pinch or fall apart, so the probe radius 1/alpha (0.8 m frame) is tried at each of ``RADIUS_STEPS``
+times itself, and the first shape that touches at least ``MIN_COVER`` of the cluster's points and is a
+closed, one-piece 2-manifold is taken.
 When none is, or the cluster is degenerate (fewer than 5 points, flat), we fall back to the convex hull
 (boxed by ``PAD`` for flat or tiny clusters), oriented outward. A *carved* alpha shape (``carved_hull``)
 also keeps out of given blocker points (main-branch wood a lobe wraps round, ``carve.unwrap``).
