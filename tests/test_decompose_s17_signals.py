@@ -37,7 +37,12 @@ def test_held_signals_wait_for_the_end_of_the_block():
     assert reached and got == [signal.SIGINT, signal.SIGTERM]
     assert (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) == before
     out = []
-    t = threading.Thread(target=lambda: out.append(held(signal.SIGINT).__enter__()))
+
+    def off_main():
+        with held(signal.SIGINT) as got:
+            out.append(got)
+
+    t = threading.Thread(target=off_main)
     t.start()
     t.join()
     assert out == [[]]  # off the main thread: nothing held, no error
