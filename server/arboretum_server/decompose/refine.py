@@ -9,7 +9,7 @@ that fails, routed again with them. A new lobe's branch that no repair clears (i
 lobe: the outer part of a lobe, inserted or split off) is routed round the kept lobes alone, and the new
 lobes in its way are carved out of it (``tunnel.behind``, the last step of ``make_lobes``); failing that,
 its centre moves to one of its own points that a straight branch reaches clear (``tunnel.moved_centre``).
-Lobes keep their order; new ones come last (a lobe that loses all its points is dropped). Point indices
+Lobes keep their order; new ones come last (a lobe an insert leaves under 4 points is dropped). Point indices
 refer to ``Decomposition.points``; strokes are in the HBL's output frame.
 """
 
@@ -34,6 +34,10 @@ ROUTE_ROUNDS = 3
 """Routing rounds of a refinement (``make_lobes`` calls): kept lobes whose branches run through the new
 lobes of one round keep their hulls and are routed again in the next, among everything else built so
 far; the last round's result stands."""
+MIN_LOBE_POINTS = 4
+"""Fewest distinct points a lobe made by a refinement holds: four points span a volume, fewer give a
+made-up box. An inserted lobe or a split piece needs this many; a lobe an insert leaves with fewer joins
+the new lobe."""
 
 
 def _lobe_index(d: Decomposition, j: int) -> int:
@@ -55,10 +59,13 @@ def _point_indices(d: Decomposition, indices) -> np.ndarray:
     except ValueError:
         idx = np.zeros(0, object)
     if idx.dtype.kind not in "iu" or idx.size == 0:
-        raise InputError(f"insert lobe: select 1 or more point indices (integers) in 0..{len(d.points) - 1}")
+        raise InputError(f"insert lobe: select 4 or more point indices (integers) in 0..{len(d.points) - 1}")
     idx = np.unique(idx.astype(np.int64).reshape(-1))
     if idx.min() < 0 or idx.max() >= len(d.points):
-        raise InputError(f"insert lobe: select 1 or more point indices in 0..{len(d.points) - 1}")
+        raise InputError(f"insert lobe: select 4 or more point indices in 0..{len(d.points) - 1}")
+    if len(idx) < MIN_LOBE_POINTS:
+        raise InputError(f"insert lobe: the selection holds {len(idx)} different point(s); a lobe needs at least "
+                         f"{MIN_LOBE_POINTS} (it encloses a volume)")
     return idx
 
 
@@ -183,10 +190,16 @@ def _take(d: Decomposition, taken: np.ndarray) -> tuple[list[LobeState], list[np
 
 def insert_lobe(d: Decomposition, indices: np.ndarray) -> Decomposition:
     """A new lobe over the selected point ``indices``, taken from the lobes that held them: those get a
-    new centre (their remaining points' mean), hull and secondary branch; the new lobe comes last."""
+    new centre (their remaining points' mean), hull and secondary branch; the new lobe comes last. A lobe
+    left with fewer than ``MIN_LOBE_POINTS`` points gives them to the new lobe and is dropped."""
     t0 = time.perf_counter()
     idx = _point_indices(d, indices)
     kept, shrunk, at_kept, at_shrunk = _take(d, idx)
+    crumbs = [k for k, g in enumerate(shrunk) if len(g) < MIN_LOBE_POINTS]
+    if crumbs:
+        idx = np.unique(np.concatenate([idx, *(shrunk[k] for k in crumbs)]))
+        shrunk = [g for k, g in enumerate(shrunk) if k not in crumbs]
+        at_shrunk = [a for k, a in enumerate(at_shrunk) if k not in crumbs]
     groups = [*shrunk, idx]
     centres = np.array([d.points[g].mean(axis=0) for g in groups])
     rank = {k: r for r, k in enumerate(sorted(at_kept + at_shrunk))}
@@ -287,11 +300,15 @@ def split_lobe(d: Decomposition, j: int, strokes: list[np.ndarray], seed: int = 
         raise InputError(f"split lobe: the seed must be an integer >= 0, got {seed!r}") from None
     if len(strokes) < 2:
         raise InputError("split lobe: draw at least two strokes (one per new lobe)")
-    if len(strokes) > len(lb.members):
-        raise InputError(f"split lobe: {len(strokes)} strokes for a lobe of {len(lb.members)} points")
+    if len(strokes) * MIN_LOBE_POINTS > len(lb.members):
+        raise InputError(f"split lobe: {len(strokes)} strokes for a lobe of {len(lb.members)} points (each new "
+                         f"lobe needs at least {MIN_LOBE_POINTS})")
     pts = d.points[lb.members]
     owner = stroke_parts(pts, [from_output(d, s) for s in strokes], j, d.output_scale)
     groups = [lb.members[owner == k] for k in range(len(strokes))]
+    if (small := [k for k, g in enumerate(groups) if len(g) < MIN_LOBE_POINTS]):
+        raise InputError(f"split lobe: stroke {small[0]} keeps {len(groups[small[0]])} point(s) of lobe {j}; each new "
+                         f"lobe needs at least {MIN_LOBE_POINTS}: draw it over more of the lobe")
     centres = np.array([d.points[g].mean(axis=0) for g in groups])
     kept = [x for k, x in enumerate(d.lobes) if k != j]
     return _finish(d, kept, groups, centres, t0, "split_lobe")
