@@ -6,7 +6,8 @@ an exit code). Registering modules import nothing heavy, so ``arboretum --help``
 library never imports the server or the client.
 
 A user's mistake (``ArboretumError``) prints one line and exits 2; Ctrl-C exits 130 after the
-command's own clean-up has run.
+command's own clean-up has run. With ``--json`` a failure also prints one JSON object on stdout,
+``{"command", "error", "exit"}`` (``fail``), so a script reading stdout always gets JSON.
 """
 
 from __future__ import annotations
@@ -25,8 +26,20 @@ from .errors import ArboretumError
 GROUP = "arboretum.commands"
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser, whose usage errors also print ``fail``'s JSON when the command line asks for
+    ``--json`` (subcommand parsers are made of the same class)."""
+
+    json_errors = False
+
+    def error(self, message: str):
+        if _Parser.json_errors:
+            _json_failure(self.prog.removeprefix("arboretum").strip() or "arboretum", message, 2)
+        super().error(message)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="arboretum",
         description="Realistic 3D trees from real ones: scans -> HBL example libraries -> assembly -> growth -> export.",
     )
@@ -101,8 +114,26 @@ def _strict(o: Any) -> Any:
     return o
 
 
+def fail(args: argparse.Namespace, code: int, message: str, word: str = "error: ") -> int:
+    """Tell the user why the command stops: one line on stderr (``arboretum CMD: error: MESSAGE``) and,
+    under ``--json``, ``{"command", "error", "exit"}`` on stdout too, so a script that reads stdout as
+    JSON gets JSON whatever happened; returns ``code``. ``word``: "" for an interruption."""
+    print(f"arboretum {args.command}: {word}{message}", file=sys.stderr, flush=True)
+    if getattr(args, "json", False):
+        _json_failure(args.command, message, code)
+    return code
+
+
+def _json_failure(command: str, message: str, code: int) -> None:
+    try:
+        print(json.dumps({"command": command, "error": message, "exit": code}, indent=2, sort_keys=True), flush=True)
+    except BrokenPipeError:  # nobody reads stdout any more: the stderr line stands alone
+        pass
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
+    _Parser.json_errors = "--json" in (sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
@@ -110,11 +141,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except ArboretumError as exc:
-        print(f"arboretum {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        return fail(args, 2, str(exc))
     except KeyboardInterrupt:
-        print(f"arboretum {args.command}: interrupted", file=sys.stderr)
-        return 130
+        return fail(args, 130, "interrupted", word="")
     except BrokenPipeError:  # output piped into e.g. `head`, which closed early: not an error
         sys.stderr.close()
         return 0
@@ -122,8 +151,7 @@ def main(argv: list[str] | None = None) -> int:
         if exc.filename is None and exc.errno not in _DISK_ERRNOS:
             raise
         where = f"{exc.filename}: " if exc.filename is not None else ""
-        print(f"arboretum {args.command}: error: {where}{exc.strerror or exc}", file=sys.stderr)
-        return 2
+        return fail(args, 2, f"{where}{exc.strerror or exc}")
 
 
 _DISK_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EIO}

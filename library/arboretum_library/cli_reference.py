@@ -36,6 +36,10 @@ def cli_reference() -> str:
         "",
         "Generated from the code by `python -m arboretum_library.cli_reference`; do not edit by hand.",
         "",
+        "A user's mistake prints one line on stderr and exits 2; Ctrl-C exits 130, SIGTERM 143 where a command",
+        "handles it. Under `--json` a failing command also prints one object on stdout,",
+        '`{"command": ..., "error": "the same message", "exit": 2}`, so a script reading stdout always gets JSON.',
+        "",
     ]
     _walk(parser, "arboretum", 2, lines)
     return "\n".join(lines)

@@ -26,7 +26,7 @@ from contextlib import ExitStack, contextmanager
 from dataclasses import replace
 
 from arboretum_library.checks import check_height, check_seed
-from arboretum_library.cli import add_json_flag, counted, emit, tell
+from arboretum_library.cli import add_json_flag, counted, emit, fail, tell
 from arboretum_library.pointio import UP_CHOICES
 from arboretum_library.signals import held
 
@@ -116,16 +116,13 @@ def _check_usable(scan: str, cloud, options) -> None:
 def run(args: argparse.Namespace) -> int:
     """The command; SIGTERM stops it as Ctrl-C does (what the run stored is taken back, a library it created
     removed), then exits 143 (128 + SIGTERM) with one line, as ``library build`` does."""
-    import sys
-
     from arboretum_server.batch.signals import Terminated, sigterm_stops
 
     with sigterm_stops():
         try:
             return _run(args)
         except Terminated:
-            print(f"arboretum {args.command}: interrupted (SIGTERM)", file=sys.stderr, flush=True)
-            return 143
+            return fail(args, 143, "interrupted (SIGTERM)", word="")
 
 
 def _run(args: argparse.Namespace) -> int:
