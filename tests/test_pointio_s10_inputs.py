@@ -72,8 +72,9 @@ def test_coordinates_beyond_1e12_are_refused_when_read(tmp_path, pts, suffix):
 def test_scan_info_json_of_a_huge_file_is_one_error_without_warnings(tmp_path, capsys):
     (tmp_path / "huge.xyz").write_text("0 0 0\n1e308 1e308 1e308\n-1e308 -1e308 -1e308\n")
     assert main(["scan", "info", str(tmp_path / "huge.xyz"), "--json"]) == 2
-    out, err = capsys.readouterr()
-    assert out == "" and err.count("\n") == 1 and "beyond 1e+12" in err
+    out, err = capsys.readouterr()  # stdout: the error as JSON (session 18), strict
+    assert err.count("\n") == 1 and "beyond 1e+12" in err
+    assert json.loads(out) == {"command": "scan", "error": err.split("error: ", 1)[1].strip(), "exit": 2}
 
 
 def test_emit_prints_strict_json_with_null_for_non_finite_numbers(capsys):

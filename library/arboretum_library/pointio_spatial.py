@@ -16,10 +16,12 @@ def guess_up_axis(points: np.ndarray) -> tuple[str, float]:
     For each candidate axis, an upright score: log(elongation) - 0.75 log(trunk / width), where
     elongation is the robust extent along the axis (0.5-99.5 percentile) over the crown width across it
     (2 x the 95th percentile distance from the median), and trunk is the same width measured in the lowest
-    10% of the extent; an axis whose footprint is a line (thinner than ``SLAB_RATIO`` of its length: a
-    flat cloud stood on its edge) loses 4 log(ratio / SLAB_RATIO). Trees are taller than wide, narrow at the
-    foot and round in plan. X is never a candidate; a tie goes to Z. The confidence is a logistic of the
-    score difference. See docs/scan-input.md for limits.
+    10% of the extent. Ground under the axis (``ground_band``) is left out first: a scan's ground disc as
+    wide as the tree is tall hid its trunk and turned it on its side. An axis whose footprint is a line
+    (its thin side under ``SLAB_RATIO`` of both its long side and the extent along the axis: a flat cloud
+    stood on its edge, not a row of trees) loses 4 log(ratio / SLAB_RATIO). Trees are taller than wide,
+    narrow at the foot and round in plan. X is never a candidate; a tie goes to Z. The confidence is a
+    logistic of the score difference. See docs/scan-input.md for limits.
     """
     pts = np.asarray(points, dtype=np.float64)
     pts = pts[distinct_rows(pts)[0]]  # a pile of copies (no-return rows at one spot) is one point
@@ -31,10 +33,24 @@ def guess_up_axis(points: np.ndarray) -> tuple[str, float]:
 
 
 SLAB_RATIO = 0.1
-"""Footprint thinner than this fraction of its length: the cloud lies on its side along that axis."""
+"""Footprint thinner than this fraction of its length and of the height: the cloud lies on its side."""
+GROUND_SHARE = 0.5
+"""Ground under an axis: at least this share of the lowest points of its columns lie on one plane."""
+GROUND_TOL = 0.01
+"""Those points lie within this fraction of the extent along the axis of the plane."""
+GROUND_BAND = 0.03
+"""Left out as ground: the points less than this fraction of the extent above the plane, and below it."""
+GROUND_BONUS = 1.0
+"""Added to the score of an axis with ground under it and more than ground above: ground lies under a
+tree, so seen from the side (the other axis) it is a wall, which still reads as a tall, narrow-footed
+shape."""
 
 
 def _upright_score(pts: np.ndarray, axis: int) -> float:
+    ground = ground_band(pts, axis)
+    bonus = 0.0
+    if ground is not None and ground.mean() < 0.95:  # a ground patch alone stays whole
+        pts, bonus = pts[~ground], GROUND_BONUS
     h = pts[:, axis]
     across = np.delete(pts, axis, axis=1)
     eps = 1e-9 * float(np.ptp(pts, axis=0).max())
@@ -43,14 +59,55 @@ def _upright_score(pts: np.ndarray, axis: int) -> float:
     trunk = 2.0 * _spread(across[h <= lo + 0.1 * (hi - lo)])
     elongation = max(hi - lo, eps) / max(width, eps)
     narrow = min(max(trunk / max(width, eps), 0.01), 100.0)
-    return float(np.log(elongation) - 0.75 * np.log(narrow) + 4.0 * np.log(_footprint(across, eps)))
+    return float(np.log(elongation) - 0.75 * np.log(narrow) + 4.0 * np.log(_footprint(across, hi - lo, eps)) + bonus)
 
 
-def _footprint(across: np.ndarray, eps: float) -> float:
-    """min(1, (thin / long extent of the footprint) / SLAB_RATIO): below 1 for a slab standing on its edge
-    (a ground disc read with the wrong up axis), whose footprint is a line; a crown's is round."""
+def _footprint(across: np.ndarray, height: float, eps: float) -> float:
+    """min(1, (thin side of the footprint / the smaller of its long side and ``height``) / SLAB_RATIO):
+    below 1 for a slab standing on its edge (a ground disc read with the wrong up axis), whose footprint
+    is a line and which is as tall as it is long; a crown's is round, and a row of trees, whose footprint
+    is a line too, is much lower than long and as deep as it is tall."""
     ext = np.percentile(across, 99.5, axis=0) - np.percentile(across, 0.5, axis=0)
-    return min(1.0, max(float(ext.min()), eps) / max(float(ext.max()), eps) / SLAB_RATIO)
+    return min(1.0, max(float(ext.min()), eps) / max(min(float(ext.max()), height), eps) / SLAB_RATIO)
+
+
+def ground_band(pts: np.ndarray, axis: int, tries: int = 100, sample: int = 3000) -> np.ndarray | None:
+    """(N,) bool: the points of ``pts`` (N, 3) in the ground band (``GROUND_BAND``) when ``axis`` has
+    ground under it, else None. The ground: the plane, at most 27 degrees steep, that the most lowest
+    points of columns 2 % of the cloud's size wide lie within ``GROUND_TOL`` of (RANSAC, ``tries``
+    triples of at most ``sample`` columns, a fixed seed), when they are ``GROUND_SHARE`` of them."""
+    h = pts[:, axis]
+    lo, hi = np.percentile(h, [0.5, 99.5])
+    height = float(hi - lo)
+    if height <= 0:
+        return None
+    low = _column_lows(np.c_[np.delete(pts, axis, axis=1), h], 0.02 * float(np.ptp(pts, axis=0).max()))
+    if len(low) < 20:
+        return None
+    rng = np.random.default_rng(0)
+    some = low if len(low) <= sample else low[rng.choice(len(low), sample, replace=False)]
+    tol, best, best_n = GROUND_TOL * height, None, 0
+    for _ in range(tries):
+        a, b, c = some[rng.choice(len(some), 3, replace=False)]
+        n = np.cross(b - a, c - a)
+        norm = float(np.linalg.norm(n))
+        if norm == 0 or abs(n[2]) < norm / np.hypot(1.0, 0.5):
+            continue
+        k = int((np.abs((some - a) @ n) < tol * norm).sum())
+        if k > best_n:
+            best_n, best = k, (a, n / norm * np.sign(n[2]))
+    if best is None or best_n < GROUND_SHARE * len(some):
+        return None
+    return (np.c_[np.delete(pts, axis, axis=1), h] - best[0]) @ best[1] < GROUND_BAND * height
+
+
+def _column_lows(q: np.ndarray, cell: float) -> np.ndarray:
+    """The lowest point (M, 3) of ``q`` (N, 3; the third column is up) in each ``cell``-wide column."""
+    key = np.floor((q[:, :2] - q[:, :2].min(axis=0)) / max(cell, 1e-300)).astype(np.int64)
+    key = key[:, 0] * (int(key[:, 1].max()) + 1) + key[:, 1]
+    order = np.lexsort((q[:, 2], key))
+    first = np.r_[True, key[order][1:] != key[order][:-1]]
+    return q[order[first]]
 
 
 def _spread(xy: np.ndarray, q: float = 95.0) -> float:
