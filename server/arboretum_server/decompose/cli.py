@@ -302,8 +302,8 @@ def _text(d: dict) -> str:
         f"{d['scan']}: {d['points_read']} points read, {s['points']} used, {_leaves(s)}, "
         f"{s['ground_removed']} ground removed",
         f"graph: {counted(s['components'], 'component')} joined by {counted(s['bridges'], 'bridge')}",
-        f"HBL: {s['main_branches']} main branches, {s['lobes']} lobes ({s['alpha_shapes']} alpha shapes, "
-        f"{s['hull_fallbacks']} convex fallbacks), foliage from {s['foliage_source']}",
+        f"HBL: {s['main_branches']} main branches, {s['lobes']} lobes ({counted(s['alpha_shapes'], 'alpha shape')}, "
+        f"{counted(s['hull_fallbacks'], 'convex fallback')}), foliage from {s['foliage_source']}",
         f"time: {steps} (total {sum(d['timing_s'].values()):.2f} s)",
         *_stored_lines(d),
     ])
