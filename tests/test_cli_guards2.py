@@ -271,7 +271,7 @@ def test_demo_rerun_replaces_its_own_library(tmp_path, monkeypatch, capsys):
 @pytest.mark.parametrize("extra, words", [
     (["--points", "1"], "--points 1 leaves too few points"),
     (["--seed", "-1"], "--seed must not be negative"),
-    (["--height", "inf"], "--height must be a finite number > 0"),
+    (["--height", "inf"], "--height must be a finite number >= 0"),
 ])
 def test_build_options_are_checked_before_any_scan(tmp_path, cloud, capsys, extra, words):
     lib = tmp_path / "B"

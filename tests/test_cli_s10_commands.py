@@ -88,8 +88,8 @@ def test_decompose_names_only_the_wrong_option(cloud, capsys, extra, message):
 
 @pytest.mark.parametrize("extra, message", [
     (["--points", "-1"], "--points must not be negative (0: all), got -1"),
-    (["--height", "0"], "--height must be a finite number > 0, got 0.0"),
-    (["--height", "nan"], "--height must be a finite number > 0, got nan"),
+    (["--height", "-2"], "--height must be a finite number >= 0 (0: keep the scan's units), got -2.0"),
+    (["--height", "nan"], "--height must be a finite number >= 0 (0: keep the scan's units), got nan"),
 ])
 def test_build_names_only_the_wrong_option(cloud, tmp_path, capsys, extra, message):
     lib = tmp_path / "B"

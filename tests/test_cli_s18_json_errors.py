@@ -64,3 +64,18 @@ def test_interruptions_and_mistakes_inside_the_run(monkeypatch, tmp_path, capsys
     got, out, err = _run(["decompose", str(tmp_path / "x.xyz"), "--json"], capsys)
     assert got == code and json.loads(out) == {"command": "decompose", "error": error, "exit": code}
     assert err.strip().endswith(error)
+
+
+def test_a_build_stopped_by_sigterm_says_so_in_json(monkeypatch, tmp_path, capsys):
+    from arboretum_server.batch import cli as bcli
+    from arboretum_server.batch.signals import Terminated
+
+    def stop(args, folder):
+        raise Terminated()
+
+    monkeypatch.setattr(bcli, "_build", stop)
+    scan = tmp_path / "a.xyz"
+    scan.write_text("0 0 0\n0 0 1\n")
+    got, out, err = _run(["library", "build", str(scan), "--library", str(tmp_path / "L"), "--json"], capsys)
+    assert got == 143 and json.loads(out) == {"command": "library", "error": "interrupted (SIGTERM)", "exit": 143}
+    assert err.strip() == "arboretum library: interrupted (SIGTERM)"

@@ -17,15 +17,22 @@ def check_seed(seed: int, what: str = "--seed") -> None:
         raise InputError(f"{what} must not be negative, got {seed}")
 
 
-def check_height(height: float, keep_units: bool) -> None:
-    """``InputError`` for a ``--height`` that is not finite, not above 0 (0 allowed when ``keep_units``:
-    it keeps the scan's units) or beyond ``pointio.MAX_COORDINATE`` (the decomposition options' limit)."""
+def check_species(species: str | None) -> None:
+    """``InputError`` for a ``--species`` given blank ("" or spaces): not a species, and the two commands
+    that take it read it differently (``decompose`` stored ``''``, ``library build`` guessed from the file
+    name, session 18). Left out, each command has its default."""
+    if species is not None and not species.strip():
+        raise InputError(f"--species must name a species (or be left out), got {species!r}")
+
+
+def check_height(height: float) -> None:
+    """``InputError`` for a ``--height`` that is not finite, negative (0 keeps the scan's units: both
+    ``decompose`` and, since session 18, ``library build``) or beyond ``pointio.MAX_COORDINATE`` (the
+    decomposition options' limit)."""
     from .pointio import MAX_COORDINATE
 
-    if keep_units and not (math.isfinite(height) and height >= 0):
+    if not (math.isfinite(height) and height >= 0):
         raise InputError(f"--height must be a finite number >= 0 (0: keep the scan's units), got {height}")
-    if not keep_units and not (math.isfinite(height) and height > 0):
-        raise InputError(f"--height must be a finite number > 0, got {height}")
     if height > MAX_COORDINATE:
         raise InputError(f"--height must be at most {MAX_COORDINATE:g} (metres), got {height:g}")
 

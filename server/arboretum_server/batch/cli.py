@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import argparse
 
-from arboretum_library.checks import check_height, check_seed
+from arboretum_library.checks import check_height, check_seed, check_species
 from arboretum_library.cli import add_json_flag, emit
 
 
@@ -34,7 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scheduler", metavar="tcp://HOST:8786", help="use this running Dask scheduler instead")
     p.add_argument("--report", metavar="DIR", help="report folder (default: LIB-report next to LIB)")
     p.add_argument("--points", type=int, default=12000, metavar="N", help="downsample each scan (0: all)")
-    p.add_argument("--height", type=float, default=0.8, metavar="M", help="output height in metres")
+    p.add_argument("--height", type=float, default=0.8, metavar="M", help="output height in metres (0: keep each scan's units and position)")
     p.add_argument("--seed", type=int, default=0, help="decomposition seed")
     p.add_argument("--leaf-off", action="store_true",
                    help="every scan is of a tree without leaves: report all points as wood")
@@ -58,8 +58,9 @@ def check_args(args: argparse.Namespace) -> str:
 
     if args.points < 0:
         raise InputError(f"--points must not be negative (0: all), got {args.points}")
-    check_height(args.height, keep_units=False)
+    check_height(args.height)  # as decompose: 0 keeps the scan's units
     check_seed(args.seed)
+    check_species(args.species)
     check_points(DecomposeOptions(points=args.points), "--points")
     folder = args.report or f"{str(Path(args.library)).rstrip('/')}-report"
     if Path(folder).exists() and not Path(folder).is_dir():
@@ -74,7 +75,7 @@ def check_args(args: argparse.Namespace) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """The command; SIGTERM stops it as Ctrl-C does, then exits 143 (128 + SIGTERM) with one line."""
-    import sys
+    from arboretum_library.cli import fail
 
     from .signals import Terminated, sigterm_stops
 
@@ -83,8 +84,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             return _build(args, folder)
         except Terminated:
-            print(f"arboretum {args.command}: interrupted (SIGTERM)", file=sys.stderr, flush=True)
-            return 143
+            return fail(args, 143, "interrupted (SIGTERM)", word="")
 
 
 def _build(args: argparse.Namespace, folder: str) -> int:
@@ -98,7 +98,7 @@ def _build(args: argparse.Namespace, folder: str) -> int:
 
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     opts = BuildOptions(species=args.species, workers=args.workers, scheduler=args.scheduler,
-                        points=args.points, height=args.height, seed=args.seed, leaf_off=args.leaf_off, rebuild=args.rebuild,
+                        points=args.points, height=args.height or None, seed=args.seed, leaf_off=args.leaf_off, rebuild=args.rebuild,
                         recursive=args.recursive, worker_timeout=args.worker_timeout)
     status = StatusLine() if not args.json else _waiting_on_stderr()
     created = not Path(args.library).exists()

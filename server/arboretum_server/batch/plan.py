@@ -108,11 +108,16 @@ def _skip(lib, r, ids: list[str], options: Any) -> None:
                if options is not None and k in params and params.get(k) != getattr(options, k)]
     r.species = prov.species  # what is stored, not what this run would have made
     if differ:
-        was = ", ".join(f"--{k} {old}" for k, old, _ in differ)
-        now = ", ".join(f"--{k} {new}" for k, _, new in differ)
+        was = ", ".join(f"--{k} {_arg(old)}" for k, old, _ in differ)
+        now = ", ".join(f"--{k} {_arg(new)}" for k, _, new in differ)
         r.notes.append(f"its {len(ids)} examples were made with {was}, not this run's {now}: left as they "
                        "are; --rebuild decomposes it again with this run's options (or delete them: "
                        "arboretum library delete)")
+
+
+def _arg(value: Any) -> Any:
+    """An option's value as the command line gives it: a height of None (the scan's units) is --height 0."""
+    return 0 if value is None else value
 
 
 def _damaged(lib, r, ids: list[str]) -> bool:

@@ -11,6 +11,7 @@ import gc
 import os
 import time
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 from arboretum_library.model import Example
@@ -125,10 +126,20 @@ def _run(path: str, sha256: str, options: dict[str, Any], t0: float) -> ScanOutc
     try:
         return _decompose(path, sha256, options, t0)
     except ArboretumError as exc:
-        return _failed(path, sha256, str(exc), t0)
+        return _failed(path, sha256, without_path(str(exc), path), t0)
     except (MemoryError, RecursionError, ValueError, FloatingPointError, IndexError, RuntimeError,
             OSError, ArithmeticError, TypeError, KeyError) as exc:  # a scan the pipeline cannot handle
         return _failed(path, sha256, f"{type(exc).__name__}: {exc}", t0)
+
+
+def without_path(message: str, path: str) -> str:
+    """``message`` without the leading "'PATH': " that the point readers put first (``pointio``): the
+    build's line and its record name the scan already ("failed: PATH: 1 point(s) have NaN ...")."""
+    for name in dict.fromkeys((path, str(Path(path)))):  # the reader names it as a Path: ./a.xyz is a.xyz
+        prefix = f"'{name}': "
+        if message.startswith(prefix):
+            return message[len(prefix):]
+    return message
 
 
 def _failed(path: str, sha256: str, message: str, t0: float) -> ScanOutcome:

@@ -25,7 +25,7 @@ import time
 from contextlib import ExitStack, contextmanager
 from dataclasses import replace
 
-from arboretum_library.checks import check_height, check_seed
+from arboretum_library.checks import check_height, check_seed, check_species
 from arboretum_library.cli import add_json_flag, counted, emit, fail, tell
 from arboretum_library.pointio import UP_CHOICES
 from arboretum_library.signals import held
@@ -73,8 +73,9 @@ def _options(args: argparse.Namespace):
             raise InputError(f"--{name} must be at least 1, got {v}")
     if args.points < 0:
         raise InputError(f"--points must not be negative (0: all), got {args.points}")
-    check_height(args.height, keep_units=True)
+    check_height(args.height)
     check_seed(args.seed)
+    check_species(args.species)
     floor = _min_points_floor()
     if args.min_points is not None and args.min_points < floor:
         raise InputError(f"--min-points must be at least {floor} (the points of one lobe), got {args.min_points}")
