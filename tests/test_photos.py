@@ -183,7 +183,8 @@ def test_photos_of_a_synthetic_tree_reconstruct_close_to_it(tmp_path, capsys):
     cloud = read_points(out)
     assert len(cloud) >= 60
     to_truth, _ = chamfer(sim.apply(cloud.points), photos.surface)
-    assert to_truth < 0.05
+    # it failed in 2 of 13 whole slow-suite runs (1.06 and 1.13 m) before seeding; say what was kept
+    assert to_truth < 0.05, (to_truth, cloud.up_axis, data["sfm"]["points"], data["isolate"])
     dec = decompose(cloud.points, DecomposeOptions(points=0, min_points=50, n_main=3, n_lobes=8))
     examples = make_examples(dec.hbl, provenance(out, DecomposeOptions()), counter_ids("photo"))
     assert len(examples) >= 2

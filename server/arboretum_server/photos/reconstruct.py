@@ -3,6 +3,9 @@
 Steps (each timed in ``SfmCloud.stats['timing_s']``): SIFT feature extraction on the CPU (one shared
 camera, SIMPLE_RADIAL), matching (exhaustive for up to ``exhaustive_max`` images, else sequential with
 the images in name order), incremental mapping (the model with the most registered images is kept).
+The same photographs and seed give the same cloud: the images enter the database in name order before
+the (threaded) extraction, whose threads would otherwise number them in the order they finish, and the
+two-view RANSAC of geometric verification is seeded (COLMAP's default, -1, seeds it afresh each run).
 Dense stereo (undistortion, patch-match stereo, fusion) needs pycolmap built with CUDA: with
 ``dense='auto'`` it runs only when ``cuda_available()``; on a CPU-only build the result is the sparse
 cloud, which holds a few thousand points for two dozen photographs (see docs/photos.md).
@@ -44,7 +47,8 @@ class ReconstructOptions:
     dense: str = "auto"
     """'auto' (dense stereo when CUDA is present), 'never', or 'always' (an error without CUDA)."""
     seed: int = 0
-    """Seed of COLMAP's random sampling (RANSAC, initial pair trials)."""
+    """Seed of COLMAP's random sampling (two-view RANSAC in matching, mapping's RANSAC and initial pair
+    trials)."""
     num_threads: int = -1
     """Threads for extraction, matching and mapping (-1: all cores)."""
     verbose: bool = False
@@ -156,6 +160,9 @@ def _extract(db: Path, images: Path, names: list[str], o: ReconstructOptions) ->
     ext.sift.max_num_features = o.max_features
     reader = pycolmap.ImageReaderOptions()
     reader.camera_model = o.camera_model
+    pycolmap.Database.open(str(db)).close()  # import_images wants the database to exist
+    pycolmap.import_images(str(db), str(images), camera_mode=pycolmap.CameraMode.SINGLE, image_names=names,
+                           options=reader)  # image ids in name order, whatever order extraction ends in
     pycolmap.extract_features(str(db), str(images), image_names=names, camera_mode=pycolmap.CameraMode.SINGLE,
                               reader_options=reader, extraction_options=ext, device=pycolmap.Device.cpu)
 
@@ -165,13 +172,16 @@ def _match(db: Path, o: ReconstructOptions, matcher: str) -> None:
 
     opts = pycolmap.FeatureMatchingOptions()
     opts.num_threads = o.num_threads
+    verify = pycolmap.TwoViewGeometryOptions()
+    verify.ransac.random_seed = o.seed  # -1 (the default) draws a new seed every run
     if matcher == "exhaustive":
-        pycolmap.match_exhaustive(str(db), matching_options=opts, device=pycolmap.Device.cpu)
+        pycolmap.match_exhaustive(str(db), matching_options=opts, verification_options=verify,
+                                  device=pycolmap.Device.cpu)
     else:
         pairing = pycolmap.SequentialPairingOptions()
         pairing.overlap = o.sequential_overlap
         pycolmap.match_sequential(str(db), matching_options=opts, pairing_options=pairing,
-                                  device=pycolmap.Device.cpu)
+                                  verification_options=verify, device=pycolmap.Device.cpu)
 
 
 def _map(db: Path, images: Path, out: Path, o: ReconstructOptions, n_images: int):
