@@ -37,6 +37,20 @@ GROUND_WIDER = 3.0
 GROUND_BELOW = 0.01
 """At most this fraction of the points lies below the ground (a plane through the underside of a crown
 has the trunk below it)."""
+GROUND_EDGE = 0.01
+"""Far strays are looked for among this share of the lowest and of the highest points (``body_span``)."""
+GROUND_FAR = 0.1
+"""A gap in z wider than this fraction of the rest's span sets the points beyond it apart (``body_span``)."""
+GROUND_SPAN = 1.1
+"""The span of z the ground search scales by is at most this many times the 0.1-99.9 percentile span
+(``body_span``: outliers strewn above and below the tree, with no gap)."""
+GROUND_DIP = 0.03
+"""When neither surface is accepted, each column of the ground follows its lowest point down to this
+fraction of the height below it (a ditch 1 % deep held more than ``GROUND_BELOW`` of the points)."""
+GROUND_GAIN = 0.05
+"""A curved ground is tried before the plane when it fits this share of the column minima more."""
+GROUND_BEND = 0.15
+"""A curved ground rises or falls at most this fraction of the height from its plane part."""
 PILE_APART = 0.25
 """The most repeated point is left out when every other point lies farther from it than this fraction of
 their height: a scanner's no-return rows (0, 0, 0), far from a tree in a georeferenced frame, would
@@ -93,6 +107,27 @@ def _spread(q: np.ndarray) -> float:
     return np.inf if len(q) < 5 else plan_radius(q, 50)
 
 
+def body_span(z: np.ndarray) -> tuple[float, float]:
+    """Lowest and highest z of ``z`` (N,) once far strays are set apart: among the lowest and the highest
+    ``GROUND_EDGE`` of the values, a gap wider than ``GROUND_FAR`` of the span between them sets apart
+    everything beyond it (a bird 30 m above a 5 m tree made the ground search's cells and band six times
+    too coarse); and neither end lies more than ``GROUND_SPAN`` times the 0.1-99.9 percentile span from
+    the other's percentile. Without such strays: the min and the max."""
+    zs = np.sort(z)
+    n = len(zs)
+    k = max(1, int(GROUND_EDGE * n))
+    if n < 2 * k + 2:
+        return float(zs[0]), float(zs[-1])
+    far = GROUND_FAR * float(zs[n - 1 - k] - zs[k])
+    top = np.flatnonzero(np.diff(zs[n - 1 - k:]) > far)
+    bottom = np.flatnonzero(np.diff(zs[:k + 1]) > far)
+    hi = zs[n - 1 - k + top[0]] if len(top) else zs[-1]
+    lo = zs[bottom[-1] + 1] if len(bottom) else zs[0]
+    p_lo, p_hi = zs[int(0.001 * (n - 1))], zs[int(np.ceil(0.999 * (n - 1)))]
+    reach = GROUND_SPAN * (p_hi - p_lo)
+    return float(max(lo, p_hi - reach)), float(min(hi, p_lo + reach))
+
+
 def lowest_per_cell(pts: np.ndarray, cell: float) -> np.ndarray:
     """The lowest point (M, 3) of ``pts`` (N, 3) in each ``cell`` x ``cell`` column of the xy plane
     (columns widened so that no axis holds more than 2 ** 20 of them)."""
@@ -104,21 +139,38 @@ def lowest_per_cell(pts: np.ndarray, cell: float) -> np.ndarray:
     return pts[order[first]]
 
 
-def ground_plane(pts: np.ndarray, band_frac: float) -> np.ndarray | None:
-    """(a, b, c) of the ground z = a x + b y + c under ``pts`` (N, 3), or None when there is none.
+@dataclass(frozen=True, eq=False)
+class Ground:
+    """The ground under a tree: the plane z = a x + b y + c, bent by a quadratic about ``centre`` when one
+    plane does not fit it (a bowl, a dome, a valley)."""
 
-    RANSAC (``GROUND_TRIES`` triples, a fixed seed) over the lowest point of every ``GROUND_CELL``
-    column (scored on at most ``GROUND_SAMPLE`` of them): the plane, at most ``GROUND_TILT`` steep,
-    that most of those lie within half of ``band_frac`` of the height of, refitted by least squares to
-    all of them that do.
+    plane: np.ndarray
+    """(3,) a, b, c."""
+    bend: np.ndarray | None = None
+    """(3,) the x², x y and y² terms about ``centre``, or None for a plane."""
+    centre: np.ndarray | None = None
+    """(2,) x, y the bend is measured from."""
+
+    def height(self, xy: np.ndarray) -> np.ndarray:
+        """(N,) the ground's z under ``xy`` (N, 2)."""
+        z = xy @ self.plane[:2] + self.plane[2]
+        if self.bend is None:
+            return z
+        d = xy - self.centre
+        return z + d[:, 0] ** 2 * self.bend[0] + d[:, 0] * d[:, 1] * self.bend[1] + d[:, 1] ** 2 * self.bend[2]
+
+
+def ground_plane(low: np.ndarray, tol: float) -> np.ndarray | None:
+    """(a, b, c) of the ground z = a x + b y + c through the column minima ``low`` (M, 3), or None.
+
+    RANSAC (``GROUND_TRIES`` triples, a fixed seed; scored on at most ``GROUND_SAMPLE`` of ``low``): the
+    plane, at most ``GROUND_TILT`` steep, that most minima lie within ``tol`` of, refitted by least
+    squares to all of them that do.
     """
-    h = float(np.ptp(pts[:, 2]))
-    low = lowest_per_cell(pts, GROUND_CELL * h)
     if len(low) < 20:
         return None
     rng = np.random.default_rng(0)  # its own: the downsampling stream stays as it was
     some = low if len(low) <= GROUND_SAMPLE else low[rng.choice(len(low), GROUND_SAMPLE, replace=False)]
-    tol = band_frac * h / 2
     best, best_n = None, 0
     for _ in range(GROUND_TRIES):
         a, b, c = some[rng.choice(len(some), 3, replace=False)]
@@ -136,24 +188,107 @@ def ground_plane(pts: np.ndarray, band_frac: float) -> np.ndarray | None:
     return coef
 
 
-def find_ground(pts: np.ndarray, band_frac: float) -> tuple[np.ndarray, np.ndarray | None]:
-    """(N,) bool ground points of ``pts`` (N, 3), flat or sloped, and the ground plane (a, b, c) or None
-    when there is no ground.
+def ground_curve(low: np.ndarray, plane: np.ndarray, tol: float, h: float) -> Ground | None:
+    """The quadratic ground through the column minima ``low`` (M, 3) grown from ``plane``: fitted by least
+    squares to the minima within 8, 4, 2, then 1 ``tol`` of the last fit (a bowl 4.5 % of the height
+    deep leaves only a ring of minima within ``tol`` of one plane), or None when it bends more than
+    ``GROUND_BEND`` of ``h`` over the minima it fits or fits fewer than 20."""
+    centre = np.median(low[:, :2], axis=0)
+    d = (low[:, :2] - centre) / h  # scaled: a georeferenced x squared loses its digits
+    design = np.c_[d, np.ones(len(low)), d[:, 0] ** 2, d[:, 0] * d[:, 1], d[:, 1] ** 2]
+    fit = low[:, :2] @ plane[:2] + plane[2]
+    on = np.zeros(len(low), bool)
+    for reach in (8, 4, 2, 1):
+        on = np.abs(low[:, 2] - fit) < reach * tol
+        if on.sum() < 20:
+            return None
+        a = design[on]
+        coef, *_ = np.linalg.lstsq(a.T @ a, a.T @ low[on, 2], rcond=None)  # the normal equations: quick
+        fit = design @ coef
+    bend = coef[3:] / h ** 2
+    if np.ptp(design[on, 3:] @ coef[3:]) > GROUND_BEND * h:
+        return None
+    slope = coef[:2] / h
+    return Ground(np.r_[slope, coef[2] - centre @ slope], bend, centre)
 
-    The ground is the plane of ``ground_plane`` when at most ``GROUND_BELOW`` of the points lie below it
-    and the points within half of ``band_frac`` of the height of it spread ``GROUND_WIDER`` times wider
-    than the trunk: the narrowest of the slices ``band_frac`` / 3 thick from ``band_frac`` to
-    6 ``band_frac`` above it (low branches widen some). Removed: everything below the first slice from
-    ``band_frac`` up that is trunk-wide again (at most twice the trunk's spread), grass and a rough
-    surface with it.
+
+def find_ground(pts: np.ndarray, band_frac: float) -> tuple[np.ndarray, Ground | None]:
+    """(N,) bool ground points of ``pts`` (N, 3), flat, sloped or curved, and the ``Ground`` or None when
+    there is no ground.
+
+    Scales come from the points between ``body_span``'s (far strays aside) and the ground is sampled by
+    ``lowest_per_cell`` over ``GROUND_CELL`` columns of them. The ground is ``ground_plane``, or
+    ``ground_curve`` when that fits ``GROUND_GAIN`` more of the column minima or the plane is refused:
+    accepted (``_cut``) when at most ``GROUND_BELOW`` of the points lie below it and the points within
+    half of ``band_frac`` of the height of it spread ``GROUND_WIDER`` times wider than the trunk. When
+    neither is, each is tried once more following shallow dips (``_dips``: a ditch), if at most
+    ``GROUND_BELOW`` of the points lie ``GROUND_DIP`` of the height or more below it.
     """
     none = np.zeros(len(pts), bool), None
-    h = float(np.ptp(pts[:, 2]))
-    coef = ground_plane(pts, band_frac) if h > 0 else None
+    lo, hi = body_span(pts[:, 2])
+    h = hi - lo
+    if h <= 0:
+        return none
+    inside = (pts[:, 2] >= lo) & (pts[:, 2] <= hi)
+    body = pts if inside.all() else pts[inside]
+    low = lowest_per_cell(body, GROUND_CELL * h)
+    tol = band_frac * h / 2
+    coef = ground_plane(low, tol)
     if coef is None:
         return none
-    up = pts[:, 2] - (pts[:, :2] @ coef[:2] + coef[2])  # height above the ground
-    step = band_frac * float(up.max()) / 3  # of the tree's height: a slope's rise is not the tree's
+    first, second = Ground(coef), None
+    gain = GROUND_GAIN * len(low)
+    if _fits(low, first, tol) + gain < len(low):  # room for a curve to fit more
+        second = ground_curve(low, coef, tol, h)
+        if second is not None and _fits(low, second, tol) > _fits(low, first, tol) + gain:
+            first, second = second, first
+    cut = _cut(pts, first.height(pts[:, :2]), band_frac, inside)
+    if cut is not None:
+        return cut, first
+    second = ground_curve(low, coef, tol, h) if second is None else second
+    cut = None if second is None else _cut(pts, second.height(pts[:, :2]), band_frac, inside)
+    if cut is not None:
+        return cut, second
+    for ground in (first, second):
+        under = None if ground is None else ground.height(pts[:, :2])
+        if under is not None and (pts[:, 2] - under < -GROUND_DIP * h).sum() <= GROUND_BELOW * len(pts):
+            cut = _cut(pts, under + _dips(pts, under, GROUND_CELL * h, GROUND_DIP * h), band_frac, inside)
+            if cut is not None:
+                return cut, ground
+    return none
+
+
+def _fits(low: np.ndarray, ground: Ground, tol: float) -> int:
+    """How many of the column minima ``low`` (M, 3) lie within ``tol`` of ``ground``."""
+    return int((np.abs(low[:, 2] - ground.height(low[:, :2])) < tol).sum())
+
+
+def _dips(pts: np.ndarray, under: np.ndarray, cell: float, deep: float) -> np.ndarray:
+    """(N,) how far the lowest point of each point's ``cell``-wide column of ``pts`` (N, 3) lies below
+    the ground heights ``under`` (N,), where that is less than ``deep`` (a ditch or a hollow: the ground
+    follows it), else 0 (a trunk under a crown's underside lies deeper)."""
+    rel = pts[:, 2] - under
+    key = np.floor((pts[:, :2] - pts[:, :2].min(axis=0)) / max(cell, 1e-300)).astype(np.int64)
+    key = key[:, 0] * (int(key[:, 1].max()) + 1) + key[:, 1]
+    order = np.lexsort((rel, key))
+    first = np.r_[True, key[order][1:] != key[order][:-1]]
+    dip = np.zeros(len(pts))
+    dip[order] = rel[order[first]][np.cumsum(first) - 1]
+    return np.where((dip < 0) & (dip > -deep), dip, 0.0)
+
+
+def _cut(pts: np.ndarray, under: np.ndarray, band_frac: float, inside: np.ndarray) -> np.ndarray | None:
+    """(N,) bool: the points of ``pts`` (N, 3) cut as ground over the ground heights ``under`` (N,), or
+    None when it is no ground (``find_ground``; ``inside``: the points that set the height).
+
+    The trunk's spread is the narrowest of the slices ``band_frac`` / 3 thick from ``band_frac`` to
+    6 ``band_frac`` above the ground (low branches widen some), or to 10 ``band_frac`` when the ground is
+    not wider than that (grass as tall as 6 ``band_frac``). Cut: everything below the first slice
+    from ``band_frac`` up that is trunk-wide again (at most twice the trunk's spread), grass, a rough
+    surface and points under the ground with it.
+    """
+    up = pts[:, 2] - under  # height above the ground
+    step = band_frac * float(up[inside].max()) / 3  # of the tree's height: a slope's rise is not the tree's
     near = np.flatnonzero((up > -step) & (up < 30 * step))
     slab = np.floor(up[near] / step).astype(np.int64)
 
@@ -161,11 +296,13 @@ def find_ground(pts: np.ndarray, band_frac: float) -> tuple[np.ndarray, np.ndarr
         return _spread(pts[near[slab == k]])
 
     trunk = min(spread(k) for k in range(3, 18))
-    if ((up < -1.5 * step).sum() > GROUND_BELOW * len(pts) or not np.isfinite(trunk)
-            or _spread(pts[np.abs(up) < 1.5 * step]) < GROUND_WIDER * trunk):
-        return none
+    wide = _spread(pts[np.abs(up) < 1.5 * step])
+    if wide < GROUND_WIDER * trunk:  # grass up to 9 % of the height: the trunk shows above it
+        trunk = min(trunk, *(spread(k) for k in range(18, 30)))
+    if (up < -1.5 * step).sum() > GROUND_BELOW * len(pts) or not np.isfinite(trunk) or wide < GROUND_WIDER * trunk:
+        return None
     cut = next((k for k in range(3, 30) if spread(k) < 2 * trunk), 3)
-    return up < cut * step, coef
+    return up < cut * step
 
 
 def prepare(
@@ -179,7 +316,7 @@ def prepare(
     check_points(options)
     pts = validate(points, options)
     keep, repeats = _usable(pts, options)
-    ground, plane = find_ground(pts[keep], options.ground_band)
+    ground, surface = find_ground(pts[keep], options.ground_band)
     idx = np.flatnonzero(keep)[~ground]
     if len(idx) < options.min_points:
         raise InputError(f"point cloud: only {len(idx)} points remain after removing the ground")
@@ -189,8 +326,8 @@ def prepare(
     idx = idx[~stray]
     sub = pts[idx]
     _check_counts(len(sub), options)
-    root = find_root(sub, plane)
-    up = sub[:, 2] if plane is None else sub[:, 2] - (sub[:, :2] @ plane[:2] + plane[2])
+    up = sub[:, 2] if surface is None else sub[:, 2] - surface.height(sub[:, :2])
+    root = find_root(sub, None if surface is None else up)
     cols = trunk_columns(sub, root, up)
     height = float(sub[:, 2].max() - root[2])
     scale = WORK_HEIGHT / height

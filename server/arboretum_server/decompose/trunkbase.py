@@ -43,18 +43,19 @@ def plan_radius(q: np.ndarray, percent: float) -> float:
     return float(np.percentile(np.linalg.norm(q[:, :2] - np.median(q[:, :2], axis=0), axis=1), percent))
 
 
-def find_root(pts: np.ndarray, ground: np.ndarray | None = None) -> np.ndarray:
+def find_root(pts: np.ndarray, up: np.ndarray | None = None) -> np.ndarray:
     """(3,) trunk base of ``pts`` (N, 3): centre of the largest cluster in the lowest band, at its lowest z.
 
-    The band is the lowest ``BASE_BAND`` of the height, measured from the ``ground`` plane (a, b, c) when
-    one was found (a second tree up the slope stands in it too), else from the lowest point.
+    The band is the lowest ``BASE_BAND`` of the height, measured in ``up`` (N,), each point's height
+    above the ground, when one was found (a second tree up the slope stands in it too), else from the
+    lowest point.
     InputError when the band holds several well-separated trunks (clusters hanging from the crown aside:
     ``STANDING``, ``_no_column``), or when its largest cluster spreads too wide to be one trunk base.
     A second tree standing higher than the band is not refused here: see ``columns.trunk_columns``.
     """
     z = pts[:, 2]
     h = np.ptp(z)
-    up = z if ground is None else z - (pts[:, :2] @ ground[:2] + ground[2])
+    up = z if up is None else up
     band = np.flatnonzero(up < up.min() + BASE_BAND * h)
     if len(band) < BASE_MIN:
         band = np.argsort(up)[:BASE_MIN]
