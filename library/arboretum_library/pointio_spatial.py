@@ -16,8 +16,9 @@ def guess_up_axis(points: np.ndarray) -> tuple[str, float]:
     For each candidate axis, an upright score: log(elongation) - 0.75 log(trunk / width), where
     elongation is the robust extent along the axis (0.5-99.5 percentile) over the crown width across it
     (2 x the 95th percentile distance from the median), and trunk is the same width measured in the lowest
-    10% of the extent. Ground under the axis (``ground_band``) is left out first: a scan's ground disc as
-    wide as the tree is tall hid its trunk and turned it on its side. An axis whose footprint is a line
+    10% of the extent. Ground under the axis (``ground_band``) is left out first and adds
+    ``GROUND_BONUS``: a scan's ground disc as wide as the tree is tall hid its trunk and turned it on its
+    side. An axis whose footprint is a line
     (its thin side under ``SLAB_RATIO`` of both its long side and the extent along the axis: a flat cloud
     stood on its edge, not a row of trees) loses 4 log(ratio / SLAB_RATIO). Trees are taller than wide,
     narrow at the foot and round in plan. X is never a candidate; a tie goes to Z. The confidence is a
@@ -139,7 +140,7 @@ def _grass_top(up: np.ndarray, across: np.ndarray, height: float) -> float:
     for k in range(3, 20):
         sl = (up >= k * step) & (up < (k + 1) * step)
         if sl.sum() >= 5 and _spread(across[sl]) < 0.5 * wide:
-            return max(k * step, band)
+            return k * step  # k >= 3: never under the band
     return band
 
 
