@@ -131,12 +131,19 @@ def body_span(z: np.ndarray) -> tuple[float, float]:
 def lowest_per_cell(pts: np.ndarray, cell: float) -> np.ndarray:
     """The lowest point (M, 3) of ``pts`` (N, 3) in each ``cell`` x ``cell`` column of the xy plane
     (columns widened so that no axis holds more than 2 ** 20 of them)."""
-    cell = max(cell, float(np.ptp(pts[:, :2], axis=0).max()) / 2 ** 20, 1e-300)
-    key = np.floor((pts[:, :2] - pts[:, :2].min(axis=0)) / cell).astype(np.int64)
-    key = key[:, 0] * (int(key[:, 1].max()) + 1) + key[:, 1]
-    order = np.lexsort((pts[:, 2], key))
-    first = np.r_[True, key[order][1:] != key[order][:-1]]
+    order, first = _columns_low_first(pts[:, :2], pts[:, 2], cell)
     return pts[order[first]]
+
+
+def _columns_low_first(xy: np.ndarray, z: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """(order, first): the points ``xy`` (N, 2) sorted by ``cell``-wide column and then by ``z`` (N,), and
+    (N,) bool marking each column's first, lowest one. Columns are widened so that no axis holds more
+    than 2 ** 20 of them (a cloud far wider than tall overflowed the int64 keys)."""
+    cell = max(cell, float(np.ptp(xy, axis=0).max()) / 2 ** 20, 1e-300)
+    key = np.floor((xy - xy.min(axis=0)) / cell).astype(np.int64)
+    key = key[:, 0] * (int(key[:, 1].max()) + 1) + key[:, 1]
+    order = np.lexsort((z, key))
+    return order, np.r_[True, key[order][1:] != key[order][:-1]]
 
 
 @dataclass(frozen=True, eq=False)
@@ -268,10 +275,7 @@ def _dips(pts: np.ndarray, under: np.ndarray, cell: float, deep: float) -> np.nd
     the ground heights ``under`` (N,), where that is less than ``deep`` (a ditch or a hollow: the ground
     follows it), else 0 (a trunk under a crown's underside lies deeper)."""
     rel = pts[:, 2] - under
-    key = np.floor((pts[:, :2] - pts[:, :2].min(axis=0)) / max(cell, 1e-300)).astype(np.int64)
-    key = key[:, 0] * (int(key[:, 1].max()) + 1) + key[:, 1]
-    order = np.lexsort((rel, key))
-    first = np.r_[True, key[order][1:] != key[order][:-1]]
+    order, first = _columns_low_first(pts[:, :2], rel, cell)
     dip = np.zeros(len(pts))
     dip[order] = rel[order[first]][np.cumsum(first) - 1]
     return np.where((dip < 0) & (dip > -deep), dip, 0.0)
