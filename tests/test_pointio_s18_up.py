@@ -12,7 +12,7 @@ import pytest
 from arboretum_library.cli import main
 from arboretum_library.geometry import zup_to_yup
 from arboretum_library.pointio import AUTO_Y_CONFIDENCE, read_points, write_points
-from arboretum_library.pointio_spatial import ground_band, guess_up_axis
+from arboretum_library.pointio_up import ground_band, guess_up_axis
 
 
 @pytest.fixture(scope="module")

@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 from arboretum_library.cli import add_json_flag, emit
-from arboretum_library.pointio import UP_CHOICES
+from arboretum_library.pointio import SCAN_UP_CHOICES
 
 
 def register(subparsers) -> None:
@@ -38,8 +38,9 @@ def register(subparsers) -> None:
                    "generate' (its client.key_secret, or its only client secret) or one NAME.key_secret beside server.key")
     p.add_argument("--library", metavar="LIB", help="an existing example library for the embedded server")
     p.add_argument("--scan", metavar="FILE", help="point cloud to refine (refinement mode, Tab)")
-    p.add_argument("--up", choices=UP_CHOICES, default="auto",
-                   help="up axis of the --scan file (default: guessed, as 'arboretum scan info' does)")
+    p.add_argument("--up", choices=SCAN_UP_CHOICES, default="auto",
+                   help="the way up of the --scan file: z, y, z-down or y-down (upside down) (default: "
+                        "guessed, as 'arboretum scan info' does)")
     p.add_argument("--species", default="unknown",
                    help="species of the --scan tree: N_m and N_l from VRTree Table 2 (default: unknown, 8 and 40)")
     p.add_argument("--main", type=int, metavar="N", help="main branches of the --scan decomposition (overrides --species)")

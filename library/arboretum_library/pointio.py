@@ -1,13 +1,13 @@
 """Point clouds in and out: ``read_points`` for the usual scan formats, ``write_points``, ``scan_stats``.
 
 Read: .xyz .txt .csv .asc .pts (text), .ply, .pcd (v0.7 ascii/binary/binary_compressed), .las .laz,
-.npy. Write: .ply .xyz .txt .npy. Every cloud comes
-back Z up in metres (Y-up files are turned with ``geometry.yup_to_zup``), optionally recentred on its
+.npy. Write: .ply .xyz .txt .npy. Every cloud comes back Z up in metres (Y-up and upside-down files
+are turned with ``pointio_up.turn_to_zup``), optionally recentred on its
 trunk base, scaled to a height and thinned evenly to a number of points (VRTree section 4: 12,000 points,
 0.8 m). Every problem with a file raises one ``InputError`` naming it. The per-format code lives in
-``pointio_formats`` (text tables in ``pointio_text``, PCD in ``pointio_pcd``); the spatial helpers (up
-axis, trunk base, even thinning, spacing) in ``pointio_spatial``; ``scan_stats`` and ``precision_note`` in
-``pointio_stats``.
+``pointio_formats`` (text tables in ``pointio_text``, PCD in ``pointio_pcd``); the way up in
+``pointio_up``; the spatial helpers (trunk base, even thinning, spacing) in ``pointio_spatial``;
+``scan_stats`` and ``precision_note`` in ``pointio_stats``.
 """
 
 from __future__ import annotations
@@ -24,18 +24,12 @@ from numpy.typing import NDArray
 
 from . import pointio_formats as fmt
 from .errors import InputError, ValidationError
-from .geometry import yup_to_zup
 from .model import LEAF, frozen_array
 from .pointio_pcd import read_pcd
-from .pointio_spatial import (
-    column_bounds,
-    even_sample_indices,
-    guess_up_axis,
-    median_spacing,
-    trunk_base,
-)
+from .pointio_spatial import column_bounds, even_sample_indices, median_spacing, trunk_base
 from .pointio_stats import precision_note, scan_stats
 from .pointio_text import read_text
+from .pointio_up import UP_DIRECTIONS, UpGuess, guess_up, guess_up_axis, turn_to_zup
 
 __all__ = [
     "PointCloud",
@@ -47,6 +41,7 @@ __all__ = [
     "write_points",
     "scan_stats",
     "guess_up_axis",
+    "guess_up",
     "trunk_base",
     "even_sample_indices",
     "median_spacing",
@@ -90,7 +85,8 @@ class PointCloud:
     source: str = ""
     """Path of the file it was read from ('' when built in memory)."""
     up_axis: str = "z"
-    """The up axis of the file as read: 'z' or 'y' (points are Z up either way)."""
+    """The way up of the file as read (``UP_DIRECTIONS``): 'z', 'y', or 'z-down' / 'y-down' for a file
+    standing upside down (points are Z up, the right way up, whichever)."""
     resolution: float = 0.0
     """Metres: the largest gap between coordinate values the file's type could hold over the cloud's
     extent (float32: the spacing at the largest magnitude, 0.5 m at 5.4e6 m; LAS: the largest scale
@@ -113,8 +109,9 @@ class PointCloud:
                 raise ValidationError("PointCloud.labels: values must be 0 (wood) or 1 (leaf)")
         if self.branch_ids is not None:
             frozen_array(self, "branch_ids", self.branch_ids, np.int32, (n,))
-        if self.up_axis not in ("z", "y"):
-            raise ValidationError(f"PointCloud.up_axis: must be 'z' or 'y', got {self.up_axis!r}")
+        if self.up_axis not in UP_DIRECTIONS:
+            ways = ", ".join(UP_DIRECTIONS)
+            raise ValidationError(f"PointCloud.up_axis: must be one of {ways}, got {self.up_axis!r}")
         if not (np.isfinite(self.resolution) and self.resolution >= 0):
             raise ValidationError(f"PointCloud.resolution: must be a number >= 0, got {self.resolution}")
 
@@ -123,7 +120,10 @@ class PointCloud:
 
 
 UP_CHOICES = ("auto", "z", "y")
-"""The up axes a file may be read with (``ReadOptions.up``, every command's ``--up``)."""
+"""The up axes a mesh file may be read with (``export.mesh_up``: ``render --up``, ``modules --up``)."""
+SCAN_UP_CHOICES = ("auto", *UP_DIRECTIONS)
+"""The ways up a point cloud file may be read with (``ReadOptions.up``, ``scan --up``): 'z-down' and
+'y-down' for a file standing upside down. Not '-z': argparse takes ``--up -z`` for an option."""
 
 
 @dataclass(frozen=True)
@@ -131,8 +131,8 @@ class ReadOptions:
     """How ``read_points`` prepares a cloud. The defaults change nothing but the up axis."""
 
     up: str = "auto"
-    """Up axis of the file: 'auto' (``guess_up_axis``; Y only at confidence >= ``AUTO_Y_CONFIDENCE``),
-    'z' or 'y' (converted with ``yup_to_zup``)."""
+    """The way up of the file (``SCAN_UP_CHOICES``): 'auto' (``guess_up``, see ``auto_up``), 'z', 'y',
+    'z-down' or 'y-down' (turned with ``turn_to_zup``)."""
     recentre: bool = False
     """Translate so the trunk base (``trunk_base``) is the origin."""
     target_height: float | None = None
@@ -143,8 +143,8 @@ class ReadOptions:
     """Seed of the random choices in thinning."""
 
     def __post_init__(self) -> None:
-        if self.up not in UP_CHOICES:
-            raise InputError(f"up axis must be 'auto', 'z' or 'y', got {self.up!r}")
+        if self.up not in SCAN_UP_CHOICES:
+            raise InputError(f"up axis must be one of {', '.join(SCAN_UP_CHOICES)}, got {self.up!r}")
         th = self.target_height
         if th is not None and not (np.isfinite(th) and th > 0):
             raise InputError(f"target height must be a number > 0, got {th}")
@@ -159,6 +159,13 @@ squared distances, and near 1e308 extents, overflow float64."""
 
 AUTO_Y_CONFIDENCE = 0.75
 """With ``up='auto'`` a file is turned from Y up only when ``guess_up_axis`` says 'y' this surely."""
+
+
+def auto_up(guess: UpGuess) -> str:
+    """The way up ``up='auto'`` reads a file with: the guess on Y only at ``AUTO_Y_CONFIDENCE``, else
+    Z, upside down or not as the guess found it along Z."""
+    on_y = guess.direction.startswith("y") and guess.confidence >= AUTO_Y_CONFIDENCE
+    return guess.direction if on_y else guess.z_direction
 
 VRTREE_PREPROCESS = ReadOptions(recentre=True, target_height=0.8, max_points=12_000)
 """The preprocessing of VRTree section 4.1 (Data preprocessing): 12,000 points scaled to 0.8 m."""
@@ -177,10 +184,8 @@ def read_points(path: str | Path, options: ReadOptions = ReadOptions()) -> Point
     points = _checked_points(path, raw)
     up = options.up
     if up == "auto":
-        guess, confidence = guess_up_axis(points)
-        up = "y" if guess == "y" and confidence >= AUTO_Y_CONFIDENCE else "z"
-    if up == "y":
-        points = yup_to_zup(points)
+        up = auto_up(guess_up(points))
+    points = turn_to_zup(points, up)
     keep = None
     if options.max_points is not None and len(points) > options.max_points:
         keep = even_sample_indices(points, options.max_points, np.random.default_rng(options.seed))

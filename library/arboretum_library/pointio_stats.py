@@ -8,9 +8,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .geometry import zup_to_yup
 from .model import LEAF
-from .pointio_spatial import column_bounds, guess_up_axis, median_spacing
+from .pointio_spatial import column_bounds, median_spacing
+from .pointio_up import guess_up, turn_from_zup
 from .repeats import distinct_rows
 
 if TYPE_CHECKING:
@@ -80,13 +80,13 @@ def _length(metres: float) -> str:
 def scan_stats(cloud: PointCloud, seed: int = 0) -> dict[str, Any]:
     """Summary of a cloud (JSON-ready): counts, extent, height, up axis and its guess, point spacing.
 
-    ``up_guess`` and ``up_confidence`` are ``guess_up_axis`` on the points in the file's own frame.
+    ``up_axis`` is the way up the file was read with ('z-down' / 'y-down': it stood upside down and was
+    turned); ``up_guess`` and ``up_confidence`` are ``guess_up`` on the points in the file's own frame.
     ``spacing`` is the median nearest-neighbour distance over up to 2,000 sampled points (metres).
     """
     pts = cloud.points
     lo, hi = column_bounds(pts)
-    file_frame = zup_to_yup(pts) if cloud.up_axis == "y" else pts
-    guess, confidence = guess_up_axis(file_frame)
+    guess = guess_up(turn_from_zup(pts, cloud.up_axis))
     stats: dict[str, Any] = {
         "file": cloud.source,
         "points": len(pts),
@@ -95,8 +95,8 @@ def scan_stats(cloud: PointCloud, seed: int = 0) -> dict[str, Any]:
         "size": (hi - lo).tolist(),
         "height": float(hi[2] - lo[2]),
         "up_axis": cloud.up_axis,
-        "up_guess": guess,
-        "up_confidence": round(confidence, 3),
+        "up_guess": guess.direction,
+        "up_confidence": round(guess.confidence, 3),
         "spacing": median_spacing(pts, np.random.default_rng(seed)),
         "has_colors": cloud.colors is not None,
         "has_labels": cloud.labels is not None,

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 
 from arboretum_library.cli import add_json_flag, emit
-from arboretum_library.pointio import UP_CHOICES
+from arboretum_library.pointio import SCAN_UP_CHOICES
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -23,9 +23,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _add_up(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--up",
-        choices=UP_CHOICES,
+        choices=SCAN_UP_CHOICES,
         default="auto",
-        help="up axis of the file: auto-detect (default), z, or y (converted to Z up)",
+        help="the way up of the file: auto-detect (default), z, y (converted to Z up), or z-down / y-down "
+        "for a file standing upside down (turned the right way up)",
     )
 
 
@@ -95,7 +96,8 @@ def format_stats(s: dict) -> str:
         f"  points     {s['points']:,}",
         f"  extent     {extent}",
         f"  height     {s['height']:.3f} m",
-        f"  up axis    {s['up_axis']} (guess {s['up_guess']}, confidence {s['up_confidence']:.2f})",
+        f"  up axis    {s['up_axis']}{_UPSIDE_DOWN if s['up_axis'].endswith('-down') else ''} "
+        f"(guess {s['up_guess']}, confidence {s['up_confidence']:.2f})",
         f"  spacing    {s['spacing'] * 1000:.1f} mm (median nearest-neighbour distance)",
         f"  attributes {', '.join(attrs) if attrs else 'none'}",
     ]
@@ -103,6 +105,9 @@ def format_stats(s: dict) -> str:
         lines.append(f"  leaf       {s['leaf_fraction'] * 100:.1f}% of points")
     return "\n".join(lines)
 
+
+_UPSIDE_DOWN = ": the file stands upside down; turned the right way up"
+"""What ``scan info`` adds to a way up of 'z-down' or 'y-down'."""
 
 MIN_HEIGHT, MAX_HEIGHT = 1e-3, 1e3
 """Range of ``scan convert --height`` in metres: a millimetre to a kilometre covers every tree (and
@@ -148,6 +153,6 @@ def run_convert(args: argparse.Namespace) -> int:
     stats = scan_stats(cloud)
     stats["file"] = str(out)
     stats["input"] = args.input
-    text = f"wrote {out}: {len(cloud):,} points, height {stats['height']:.3f} m (from {args.input}, up {cloud.up_axis})"
+    text = f"wrote {out}: {len(cloud):,} points, height {stats['height']:.3f} m (from {args.input}, up {cloud.up_axis}{_UPSIDE_DOWN if cloud.up_axis.endswith('-down') else ''})"
     emit(args, stats, text)
     return 0

@@ -6,7 +6,7 @@ glTF is Y up by definition. OBJ and PLY do not say: Arboretum's OBJ names its ax
 Arboretum, scanners and photogrammetry tools write it. For a file without Arboretum's header,
 ``auto`` keeps the format's usual axis (OBJ Y, as Blender and Maya write it; PLY Z) unless the
 vertices stand along the other one surely: the same test as a point cloud's ``--up auto``
-(``pointio_spatial.guess_up_axis``, confidence >= 0.75), so a tree exported Z up from 3ds Max or a GIS
+(``pointio_up.guess_up_axis``, confidence >= 0.75), so a tree exported Z up from 3ds Max or a GIS
 tool is read upright. An explicit ``y`` or ``z`` always wins. Module pieces are never guessed.
 """
 
@@ -20,7 +20,7 @@ import numpy as np
 
 from arboretum_library.errors import InputError
 from arboretum_library.pointio import AUTO_Y_CONFIDENCE, UP_CHOICES
-from arboretum_library.pointio_spatial import guess_up_axis
+from arboretum_library.pointio_up import guess_up_axis
 
 from .obj import obj_header_axis
 

@@ -27,7 +27,7 @@ from dataclasses import replace
 
 from arboretum_library.checks import check_height, check_seed, check_species
 from arboretum_library.cli import add_json_flag, counted, emit, fail, tell
-from arboretum_library.pointio import UP_CHOICES
+from arboretum_library.pointio import SCAN_UP_CHOICES
 from arboretum_library.signals import held
 
 
@@ -45,7 +45,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--reach-weight", type=float, default=None, metavar="W",
                    help="main branches: score reach^W x spread^(1-W); 0 for conifers (default: 0 for pine, "
                         "0.5 otherwise)")
-    p.add_argument("--up", choices=UP_CHOICES, default="auto", help="up axis of the file")
+    p.add_argument("--up", choices=SCAN_UP_CHOICES, default="auto",
+                   help="the way up of the file: auto (default), z, y, or z-down / y-down for a file standing "
+                   "upside down")
     p.add_argument("--no-labels", action="store_true", help="ignore leaf/wood labels stored in the file")
     p.add_argument("--leaf-off", action="store_true",
                    help="the tree bore no leaves when scanned: report every point as wood (the geometry is the "
@@ -132,7 +134,7 @@ def _run(args: argparse.Namespace) -> int:
     from arboretum_library.progress import StatusLine
 
     from .examples import UP_AXIS_KEY, file_sha256, provenance
-    from .notes import bare_note, notes
+    from .notes import bare_note, notes, upside_down_note
 
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     options = _options(args)
@@ -163,7 +165,9 @@ def _run(args: argparse.Namespace) -> int:
             late = done.enter_context(held(signal.SIGINT, signal.SIGTERM))
         data = _result(args, options, len(cloud.points), {"read": t_read, **dec.timing}, dec, stored, other)
         bare = bare_note(stored[0], named=bool(stored[1]))  # library ids name them; example-000 would not
-        data["notes"] = ([coarse] if coarse else []) + notes(options, dec.stats) + data["notes"] + ([bare] if bare else [])
+        turned = upside_down_note(args.up, cloud.up_axis)
+        data["notes"] = ([turned] if turned else []) + ([coarse] if coarse else []) + notes(options, dec.stats) \
+            + data["notes"] + ([bare] if bare else [])
         emit(args, data, _text(data))
     if late:
         tell(f"arboretum {args.command}: {'Ctrl-C' if late[0] == signal.SIGINT else 'SIGTERM'} came after the "

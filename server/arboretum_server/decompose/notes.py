@@ -58,13 +58,22 @@ def refusal(message: str, coarse: str | None, error: Exception | None = None) ->
     return f"{message}; the file's precision may be why: {coarse}"
 
 
+def upside_down_note(up_asked: str, up_read: str) -> str | None:
+    """The note for a file ``--up auto`` found standing upside down (``up_read`` 'z-down' or 'y-down',
+    ``pointio_up.guess_up``) and turned the right way up, else None."""
+    if up_asked != "auto" or not up_read.endswith("-down"):
+        return None
+    return (f"--up auto found the file upside down (its trunk at the top) and turned it the right way up "
+            f"(--up {up_read}); pass --up {up_read[0]} to read it as written")
+
+
 def up_guess_flat(points_zup, up_asked: str, up_read: str) -> str | None:
     """Why a cloud read with ``--up auto`` lies at one height when the guess turned it (``up_read``
     'y'), yet the file as written does not (its Z spreads): a vertical wall in a Z-up file reads as Y up
     (``pointio.guess_up_axis``) and then lies flat. The message, else None. ``points_zup`` (N, 3) as read."""
     import numpy as np
 
-    if up_asked != "auto" or up_read != "y":
+    if up_asked != "auto" or up_read not in ("y", "y-down"):
         return None
     pts = np.asarray(points_zup, dtype=np.float64)
     pts = pts[np.isfinite(pts).all(axis=1)]

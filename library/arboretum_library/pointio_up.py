@@ -1,0 +1,287 @@
+"""The way up of a raw scan, numpy only: ``guess_up`` (+Z, +Y, or either upside down), the turns to Z up,
+and ``ground_band`` (the ground under an axis).
+
+Split out of ``pointio_spatial`` (session 19), which keeps the trunk base, thinning and spacing;
+``pointio`` re-exports both.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .pointio_spatial import column_bounds
+from .repeats import distinct_rows
+
+UP_DIRECTIONS = ("z", "y", "z-down", "y-down")
+"""The ways up ``guess_up`` tells apart: +Z, +Y, -Z (a file upside down), -Y."""
+
+
+@dataclass(frozen=True)
+class UpGuess:
+    """What ``guess_up`` found: the way up of a cloud, and how sure it is of the axis."""
+
+    direction: str
+    """One of ``UP_DIRECTIONS``: the axis that scored higher, and its way up."""
+    confidence: float
+    """In [0.5, 1): how sure the axis (Z or Y) is; a logistic of the score difference."""
+    z_direction: str
+    """'z' or 'z-down': the way up along Z, for a file kept on Z when the confidence is too low for Y."""
+
+
+def guess_up(points: np.ndarray) -> UpGuess:
+    """Guess the way up of a tree: +Z, +Y, or either upside down (``UP_DIRECTIONS``).
+
+    For each axis the way up is found first (``_upside_down``: ground, else a trunk at the top end),
+    then the axis is scored that way up with ``_upright_score``: log(elongation) - 0.75 log(trunk /
+    width), where elongation is the robust extent along the axis (0.5-99.5 percentile) over the crown
+    width across it (2 x the 95th percentile distance from the median), and trunk is the same width
+    measured in the lowest 10% of the extent. Ground under the axis (``ground_band``) is left out first
+    and adds ``GROUND_BONUS``: a scan's ground disc as wide as the tree is tall hid its trunk and turned
+    it on its side. An axis whose footprint is a line (its thin side under ``SLAB_RATIO`` of both its
+    long side and the extent along the axis: a flat cloud stood on its edge, not a row of trees) loses
+    4 log(ratio / SLAB_RATIO). Trees are taller than wide, narrow at the foot and round in plan. X is
+    never a candidate; a tie goes to Z. See docs/scan-input.md for limits.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    pts = pts[distinct_rows(pts)[0]]  # a pile of copies (no-return rows at one spot) is one point
+    if len(pts) > 50_000:
+        pts = pts[np.random.default_rng(0).choice(len(pts), 50_000, replace=False)]
+    z_way, s_z = _way_up(pts, 2)
+    y_way, s_y = _way_up(pts, 1)
+    confidence = float(1.0 / (1.0 + np.exp(-2.0 * min(abs(s_z - s_y), 20.0))))
+    return UpGuess(y_way if s_y > s_z else z_way, confidence, z_way)
+
+
+def guess_up_axis(points: np.ndarray) -> tuple[str, float]:
+    """The axis of ``guess_up``: ('z' | 'y', confidence in [0.5, 1)), whichever way up it is."""
+    guess = guess_up(points)
+    return guess.direction[0], guess.confidence
+
+
+_TO_ZUP = {
+    "z": ((0, 1.0), (1, 1.0), (2, 1.0)),
+    "y": ((0, 1.0), (2, -1.0), (1, 1.0)),
+    "z-down": ((0, 1.0), (1, -1.0), (2, -1.0)),
+    "y-down": ((0, 1.0), (2, 1.0), (1, -1.0)),
+}
+"""For each way up, each Z-up axis as (file axis, sign): rotations (right-handed both sides)."""
+
+
+def turn_to_zup(points: np.ndarray, direction: str) -> np.ndarray:
+    """``points`` (N, 3) of a file whose way up is ``direction`` (``UP_DIRECTIONS``), turned Z up:
+    'y' (x, y, z) -> (x, -z, y) as ``geometry.yup_to_zup``; 'z-down' -> (x, -y, -z), half a turn about
+    X; 'y-down' -> (x, z, -y). 'z' returns ``points`` itself."""
+    if direction == "z":
+        return points
+    p = np.asarray(points)
+    return np.stack([sign * p[:, col] for col, sign in _TO_ZUP[direction]], axis=1)
+
+
+def turn_from_zup(points: np.ndarray, direction: str) -> np.ndarray:
+    """The inverse of ``turn_to_zup``: Z-up ``points`` (N, 3) back in the frame of a file whose way up is
+    ``direction``."""
+    if direction == "z":
+        return points
+    p = np.asarray(points)
+    out = np.zeros(p.shape, dtype=p.dtype)
+    for k, (col, sign) in enumerate(_TO_ZUP[direction]):
+        out[:, col] = sign * p[:, k]
+    return out
+
+
+def _way_up(pts: np.ndarray, axis: int) -> tuple[str, float]:
+    """The way up along ``axis`` (2: 'z' or 'z-down', 1: 'y' or 'y-down') and its upright score."""
+    flipped = pts.copy()
+    flipped[:, axis] *= -1.0
+    grounds = (_ground(pts, axis), _ground(flipped, axis))
+    down = _upside_down(pts, flipped, axis, grounds)
+    name = "zy"[2 - axis] + ("-down" if down else "")
+    return name, _upright_score(flipped if down else pts, axis, grounds[down])
+
+
+def _ground(pts: np.ndarray, axis: int) -> np.ndarray | None:
+    """``ground_band`` of ``pts`` along +``axis``, None when it is everything (a ground patch alone)."""
+    ground = ground_band(pts, axis)
+    return ground if ground is not None and ground.mean() < 0.95 else None
+
+
+SLAB_RATIO = 0.1
+"""Footprint thinner than this fraction of its length and of the height: the cloud lies on its side."""
+GROUND_CELLS = 50
+"""``ground_band`` grids the plane across the axis in cells of 1/this of the cloud's largest extent."""
+GROUND_SHARE = 0.5
+"""Ground under an axis: at least this share of the occupied columns have their lowest point on a smooth,
+gentle surface (``ground_band``)."""
+GROUND_TOL = 0.01
+"""A column's lowest point is on the surface when within this fraction of the extent along the axis of
+the median of its 3 x 3 columns' lowest points."""
+GROUND_TILT = 0.5
+"""... and the surface there rises at most this much per unit across (27 degrees)."""
+GROUND_BAND = 0.03
+"""Left out as ground: the points less than this fraction of the extent above their column's ground, and
+up to the first slice that is trunk-narrow again (grass)."""
+GROUND_BONUS = 1.0
+"""Added to the score of an axis with ground under it and more than ground above: ground lies under a
+tree, so seen from the side (the other axis) it is a wall, which still reads as a tall, narrow-footed
+shape."""
+
+
+def _upright_score(pts: np.ndarray, axis: int, ground: np.ndarray | None) -> float:
+    """The upright score of ``pts`` along +``axis`` (``guess_up``); ``ground`` (``_ground``) is left out."""
+    bonus = 0.0
+    if ground is not None:
+        pts, bonus = pts[~ground], GROUND_BONUS
+    h = pts[:, axis]
+    across = np.delete(pts, axis, axis=1)
+    eps = 1e-9 * _largest_extent(pts)
+    lo, hi = np.percentile(h, [0.5, 99.5])
+    width = 2.0 * _spread(across)
+    trunk = 2.0 * _spread(across[h <= lo + 0.1 * (hi - lo)])
+    elongation = max(hi - lo, eps) / max(width, eps)
+    narrow = min(max(trunk / max(width, eps), 0.01), 100.0)
+    return float(np.log(elongation) - 0.75 * np.log(narrow) + 4.0 * np.log(_footprint(across, hi - lo, eps)) + bonus)
+
+
+def _upside_down(pts: np.ndarray, flipped: np.ndarray, axis: int, grounds: tuple) -> bool:
+    """Whether the tree stands upside down along ``axis`` (``flipped``: ``pts`` with that axis negated;
+    ``grounds``: their ``_ground``). Ground decides first: the way whose ground lies under the rest
+    (``_ground_under``). Without ground, a trunk at the top end (``_trunk``) over a foot more than
+    ``FOOT_RATIO`` times wider does: a conifer's tip is narrow too, but it tapers, and a stem or the
+    lowest branches stand under it."""
+    under = [_ground_under(p, axis, g) for p, g in zip((pts, flipped), grounds)]
+    if min(under) < GROUND_UNDER:
+        return bool(under[1] < under[0])
+    top = _foot_widths(flipped, axis)
+    return _trunk(top) and bool(_foot_widths(pts, axis).min() > FOOT_RATIO * top.max())
+
+
+def _ground_under(pts: np.ndarray, axis: int, ground: np.ndarray | None) -> float:
+    """The share of the points off ``ground`` lying below its median height along ``axis`` (1.0 when
+    no ground): near 0 for ground under a tree, near 1 for the ground seen from the crown's side (a
+    ground disc wider than the crown is found from both ends)."""
+    if ground is None or not ground.any():
+        return 1.0
+    h = pts[:, axis]
+    return float(np.mean(h[~ground] < np.median(h[ground])))
+
+
+def _foot_widths(pts: np.ndarray, axis: int) -> np.ndarray:
+    """(FOOT_SLICES,) the width (2 x 95th percentile distance from the median) of each ``FOOT_STEP``
+    slice from the lowest end along ``axis``, over the extent along it (0.5-99.5 percentile); inf when
+    that extent is 0 (no foot, no trunk)."""
+    h = pts[:, axis]
+    across = np.delete(pts, axis, axis=1)
+    lo, hi = np.percentile(h, [0.5, 99.5])
+    height = float(hi - lo)
+    if not height > 0:
+        return np.full(FOOT_SLICES, np.inf)
+    k = np.floor((h - lo) / height / FOOT_STEP)
+    return np.array([2.0 * _spread(across[k == i]) / height for i in range(FOOT_SLICES)])
+
+
+def _trunk(widths: np.ndarray) -> bool:
+    """Foot slices (``_foot_widths``) that make a trunk: all under ``TRUNK_NARROW`` of the height, and
+    even (the widest at most ``TRUNK_EVEN`` times the narrowest: a cone's tip widens 3 times)."""
+    return bool(widths.max() < TRUNK_NARROW and widths.max() <= TRUNK_EVEN * widths.min())
+
+
+GROUND_UNDER = 0.5
+"""Ground lies under a tree when fewer than this share of the other points are below its median."""
+FOOT_STEP, FOOT_SLICES = 0.03, 3
+"""The foot of a cloud along an axis: this many slices of this fraction of the extent, from its end."""
+TRUNK_NARROW, TRUNK_EVEN = 0.15, 2.5
+"""A trunk (``_trunk``): foot slices under this fraction of the height, the widest at most this many
+times the narrowest."""
+FOOT_RATIO = 3.0
+"""Upside down: the lowest end's narrowest foot slice more than this many times the top's widest."""
+
+
+def _footprint(across: np.ndarray, height: float, eps: float) -> float:
+    """min(1, (thin side of the footprint / the smaller of its long side and ``height``) / SLAB_RATIO):
+    below 1 for a slab standing on its edge (a ground disc read with the wrong up axis), whose footprint
+    is a line and which is as tall as it is long; a crown's is round, and a row of trees, whose footprint
+    is a line too, is much lower than long and as deep as it is tall."""
+    ext = np.percentile(across, 99.5, axis=0) - np.percentile(across, 0.5, axis=0)
+    return min(1.0, max(float(ext.min()), eps) / max(min(float(ext.max()), height), eps) / SLAB_RATIO)
+
+
+def ground_band(pts: np.ndarray, axis: int) -> np.ndarray | None:
+    """(N,) bool: the ground (and grass) of ``pts`` (N, 3) when ``axis`` has ground under it, else None.
+
+    The lowest point of each column (``GROUND_CELLS``) is ground where it lies on a smooth, gentle
+    surface: within ``GROUND_TOL`` of the median of its 3 x 3 columns' lowest points, which rises at most
+    ``GROUND_TILT`` there. Flat, sloped, domed, hollow or rough ground passes; a crown's underside or
+    near side does not (its edges are steep), nor a tree's front seen from the side. When at least
+    ``GROUND_SHARE`` of the columns are ground, the band left out is the points less than
+    ``GROUND_BAND`` of the extent above their column's lowest point (the surface's, for a column whose
+    lowest point is far above it), and up to the first 1 % slice above that is half as wide as the band
+    (a trunk rising through grass). Session 18: one plane found by RANSAC missed ground that curved by 4 %
+    of the height, and the tree was turned on its side.
+    """
+    h = pts[:, axis]
+    lo, hi = np.percentile(h, [0.5, 99.5])
+    height = float(hi - lo)
+    across = np.delete(pts, axis, axis=1)
+    cell = _largest_extent(pts) / GROUND_CELLS
+    if height <= 0 or cell <= 0:
+        return None
+    ij = np.floor((across - column_bounds(across)[0]) / cell).astype(np.int64)
+    shape = tuple(column_bounds(ij)[1] + 1)
+    if min(shape) < 3:
+        return None
+    column = np.ravel_multi_index(ij.T, shape)
+    low = np.full(shape[0] * shape[1], np.inf)
+    np.minimum.at(low, column, h)
+    low = np.where(np.isfinite(low), low, np.nan).reshape(shape)
+    surface = _median3(low)
+    slope = np.hypot(*np.gradient(surface, cell))
+    occupied = np.isfinite(low)
+    with np.errstate(invalid="ignore"):
+        on = occupied & (np.abs(low - surface) < GROUND_TOL * height) & (slope < GROUND_TILT)
+        if occupied.sum() < 20 or on.sum() < GROUND_SHARE * occupied.sum():
+            return None
+        base = np.where(np.isfinite(surface) & (np.abs(low - surface) >= 0.1 * height), surface, low)
+    up = h - base.ravel()[column]
+    return up < _grass_top(up, across, height)
+
+
+def _median3(grid: np.ndarray) -> np.ndarray:
+    """The median of each cell's 3 x 3 neighbourhood of ``grid`` (NaN: empty), NaN where all are empty."""
+    import warnings
+
+    pad = np.pad(grid, 1, constant_values=np.nan)
+    rows, cols = grid.shape
+    stack = np.stack([pad[i:i + rows, j:j + cols] for i in range(3) for j in range(3)], axis=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN neighbourhoods
+        return np.nanmedian(stack, axis=2)
+
+
+def _grass_top(up: np.ndarray, across: np.ndarray, height: float) -> float:
+    """How far above its ground the band of ``ground_band`` reaches: ``GROUND_BAND`` of ``height``, or the
+    first 1 % slice from there to 20 % that is half as wide as the band (the trunk above the grass)."""
+    band = GROUND_BAND * height
+    wide = _spread(across[np.abs(up) < band])
+    step = 0.01 * height
+    for k in range(3, 20):
+        sl = (up >= k * step) & (up < (k + 1) * step)
+        if sl.sum() >= 5 and _spread(across[sl]) < 0.5 * wide:
+            return k * step  # k >= 3: never under the band
+    return band
+
+
+def _spread(xy: np.ndarray, q: float = 95.0) -> float:
+    """The ``q``-th percentile distance of 2D points (M, 2) from their median."""
+    return (
+        float(np.percentile(np.linalg.norm(xy - np.median(xy, axis=0), axis=1), q))
+        if len(xy)
+        else 0.0
+    )
+
+
+def _largest_extent(pts: np.ndarray) -> float:
+    """The largest extent of ``pts`` (N, 3) along an axis: ``np.ptp(pts, axis=0).max()``, faster."""
+    lo, hi = column_bounds(pts)
+    return float((hi - lo).max())
