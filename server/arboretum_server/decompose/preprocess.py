@@ -47,6 +47,18 @@ GROUND_SPAN = 1.1
 GROUND_DIP = 0.03
 """When neither surface is accepted, each column of the ground follows its lowest point down to this
 fraction of the height below it (a ditch 1 % deep held more than ``GROUND_BELOW`` of the points)."""
+GROUND_HELD = 2
+"""``held``: a column's ground sample has this many points of its column just above it."""
+GROUND_DITCH = 0.1
+"""``_dips`` follows a column deeper than ``GROUND_DIP`` down to this fraction of the height below the
+ground when a chain of columns, each at most ``GROUND_WALL`` deeper than the last, leads to it from a
+shallow one (a ditch 4 % deep and wide, or 8 % deep, was refused with "no trunk base")."""
+GROUND_WALL = 1.0
+"""Steepest rise over run between neighbouring columns that ``_dips`` follows down (45 degrees)."""
+GROUND_SHARE = 0.005
+"""A ground holds at least this share of the points within half of ``ground_band`` of it (scan 10's
+patch 2.5 m wide: 3.8 %; the floor of 3 % outliers strewn in a box under it, whose sparse slices made
+the real ground the "trunk": 0.04 %)."""
 GROUND_GAIN = 0.05
 """A curved ground is tried before the plane when it fits this share of the column minima more."""
 GROUND_BEND = 0.15
@@ -146,6 +158,19 @@ def _columns_low_first(xy: np.ndarray, z: np.ndarray, cell: float) -> tuple[np.n
     return order, np.r_[True, key[order][1:] != key[order][:-1]]
 
 
+def held(z: np.ndarray, order: np.ndarray, first: np.ndarray, gap: float) -> tuple[np.ndarray, np.ndarray]:
+    """(order, first) of ``_columns_low_first`` (``order``, ``first``: over heights ``z`` (N,)) kept to the
+    points that have ``GROUND_HELD`` more points of their column within ``gap`` above them (a lone
+    outlier has none): each column's ``first`` is then its lowest such point."""
+    col = np.cumsum(first) - 1
+    zs = z[order]
+    k = GROUND_HELD
+    ok = np.zeros(len(zs), bool)
+    ok[:-k] = (col[k:] == col[:-k]) & (zs[k:] - zs[:-k] < gap)
+    col = col[ok]
+    return order[ok], np.r_[True, col[1:] != col[:-1]] if len(col) else np.zeros(0, bool)
+
+
 @dataclass(frozen=True, eq=False)
 class Ground:
     """The ground under a tree: the plane z = a x + b y + c, bent by a quadratic about ``centre`` when one
@@ -224,12 +249,12 @@ def find_ground(pts: np.ndarray, band_frac: float) -> tuple[np.ndarray, Ground |
     there is no ground.
 
     Scales come from the points between ``body_span``'s (far strays aside) and the ground is sampled by
-    ``lowest_per_cell`` over ``GROUND_CELL`` columns of them. The ground is ``ground_plane``, or
-    ``ground_curve`` when that fits ``GROUND_GAIN`` more of the column minima or the plane is refused:
-    accepted (``_cut``) when at most ``GROUND_BELOW`` of the points lie below it and the points within
-    half of ``band_frac`` of the height of it spread ``GROUND_WIDER`` times wider than the trunk. When
-    neither is, each is tried once more following shallow dips (``_dips``: a ditch), if at most
-    ``GROUND_BELOW`` of the points lie ``GROUND_DIP`` of the height or more below it.
+    the lowest point of each ``GROUND_CELL`` column of them (``lowest_per_cell``; ``_surface`` fits and
+    checks it). When that finds none and those points reach a column width or more lower than the ones
+    with ``GROUND_HELD`` others of their column just above them (``held``), the columns are sampled once
+    more by their lowest held point, with the scales taken from the held points: outliers strewn under a
+    small ground were the minima of most columns and stretched the span (scan 10, its ground 2.5 m wide,
+    with 1-3 % uniform outliers: its ground was kept, the root 4 m under it).
     """
     none = np.zeros(len(pts), bool), None
     lo, hi = body_span(pts[:, 2])
@@ -238,7 +263,40 @@ def find_ground(pts: np.ndarray, band_frac: float) -> tuple[np.ndarray, Ground |
         return none
     inside = (pts[:, 2] >= lo) & (pts[:, 2] <= hi)
     body = pts if inside.all() else pts[inside]
-    low = lowest_per_cell(body, GROUND_CELL * h)
+    order, first = _columns_low_first(body[:, :2], body[:, 2], GROUND_CELL * h)
+    found = _surface(pts, body[order[first]], band_frac, inside, h)
+    if found[1] is not None:
+        return found
+    order, first = held(body[:, 2], order, first, band_frac * h / 2)
+    if first.sum() < 20:
+        return none
+    lo_held, hi = body_span(body[order, 2])  # the outliers' few held points aside
+    if lo_held - lo < GROUND_CELL * h:  # nothing strewn below the cloud: no other ground to find
+        return none
+    lo, h = lo_held, hi - lo_held
+    inside = (pts[:, 2] >= lo) & (pts[:, 2] <= hi)
+    body = pts[inside]
+    order, first = _columns_low_first(body[:, :2], body[:, 2], GROUND_CELL * h)
+    order, first = held(body[:, 2], order, first, band_frac * h / 2)
+    if first.sum() < 20:
+        return none
+    found = _surface(pts, body[order[first]], band_frac, inside, h)
+    return found if found[1] is not None else none
+
+
+def _surface(pts: np.ndarray, low: np.ndarray, band_frac: float, inside: np.ndarray,
+             h: float) -> tuple[np.ndarray, Ground | None]:
+    """(N,) bool ground points of ``pts`` (N, 3) and the ``Ground`` through the column samples ``low``
+    (M, 3), or no points and None (``find_ground``; ``h``: the height the scales come from).
+
+    The ground is ``ground_plane``, or ``ground_curve`` when that fits ``GROUND_GAIN`` more of the
+    column minima or the plane is refused: accepted (``_cut``) when at most ``GROUND_BELOW`` of the
+    points lie below it and the points within half of ``band_frac`` of the height of it spread
+    ``GROUND_WIDER`` times wider than the trunk. When neither is, each is tried once more following the
+    dips of its columns (``_dips``: a ditch), if then at most ``GROUND_BELOW`` of the points lie
+    ``GROUND_DIP`` of the height or more below it.
+    """
+    none = np.zeros(len(pts), bool), None
     tol = band_frac * h / 2
     coef = ground_plane(low, tol)
     if coef is None:
@@ -257,9 +315,14 @@ def find_ground(pts: np.ndarray, band_frac: float) -> tuple[np.ndarray, Ground |
     if cut is not None:
         return cut, second
     for ground in (first, second):
-        under = None if ground is None else ground.height(pts[:, :2])
-        if under is not None and (pts[:, 2] - under < -GROUND_DIP * h).sum() <= GROUND_BELOW * len(pts):
-            cut = _cut(pts, under + _dips(pts, under, GROUND_CELL * h, GROUND_DIP * h), band_frac, inside)
+        if ground is None:
+            continue
+        under = ground.height(pts[:, :2])
+        if (pts[:, 2] - under < -GROUND_DITCH * h).sum() > GROUND_BELOW * len(pts):
+            continue  # deeper than any dip is followed: they would stay below it (quick)
+        under = under + _dips(pts, under, GROUND_CELL * h, GROUND_DIP * h)
+        if (pts[:, 2] - under < -GROUND_DIP * h).sum() <= GROUND_BELOW * len(pts):
+            cut = _cut(pts, under, band_frac, inside)
             if cut is not None:
                 return cut, ground
     return none
@@ -272,13 +335,48 @@ def _fits(low: np.ndarray, ground: Ground, tol: float) -> int:
 
 def _dips(pts: np.ndarray, under: np.ndarray, cell: float, deep: float) -> np.ndarray:
     """(N,) how far the lowest point of each point's ``cell``-wide column of ``pts`` (N, 3) lies below
-    the ground heights ``under`` (N,), where that is less than ``deep`` (a ditch or a hollow: the ground
-    follows it), else 0 (a trunk under a crown's underside lies deeper)."""
+    the ground heights ``under`` (N,), where that is less than ``deep`` or the column is linked to such
+    a one (``_linked``: a ditch or a hollow, the ground follows it), else 0 (a trunk under a crown's
+    underside lies deeper)."""
     rel = pts[:, 2] - under
     order, first = _columns_low_first(pts[:, :2], rel, cell)
+    low = rel[order[first]]
+    follow = (low < 0) & (low > -deep)
+    follow |= (low < 0) & _linked(pts[order[first], :2], low, cell, deep)
     dip = np.zeros(len(pts))
-    dip[order] = rel[order[first]][np.cumsum(first) - 1]
-    return np.where((dip < 0) & (dip > -deep), dip, 0.0)
+    dip[order] = np.where(follow, low, 0.0)[np.cumsum(first) - 1]
+    return dip
+
+
+def _linked(xy: np.ndarray, low: np.ndarray, cell: float, deep: float) -> np.ndarray:
+    """(M,) bool: the columns (their points ``xy`` (M, 2) and lowest heights ``low`` (M,) over the ground,
+    ``cell`` wide) at most ``GROUND_DITCH`` / ``GROUND_DIP`` times ``deep`` below the ground that a chain
+    of neighbouring columns, each at most ``GROUND_WALL`` times ``cell`` deeper than the last, links to a
+    column less than ``deep`` below it or above it: the walls of a ditch, not a trunk standing under a
+    crown's underside (whose top is no ground to start from)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    cell = max(cell, float(np.ptp(xy, axis=0).max()) / 2 ** 20, 1e-300)
+    ij = np.floor((xy - xy.min(axis=0)) / cell).astype(np.int64)
+    wide = int(ij[:, 1].max()) + 3
+    key = ij[:, 0] * wide + ij[:, 1] + 1
+    order = np.argsort(key)
+    near = low > -GROUND_DITCH / GROUND_DIP * deep
+    pairs = []
+    for step in (wide, 1, wide + 1, wide - 1):  # the neighbours right, up and on both diagonals
+        at = np.minimum(np.searchsorted(key[order], key + step), len(key) - 1)
+        other = order[at]
+        ok = (key[other] == key + step) & near & near[other]
+        ok &= np.abs(low - low[other]) <= GROUND_WALL * cell * (np.sqrt(2) if step in (wide + 1, wide - 1) else 1)
+        pairs.append(np.c_[np.flatnonzero(ok), other[ok]])
+    pairs = np.concatenate(pairs)
+    m = len(low)
+    _, lab = connected_components(coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(m, m)),
+                                  directed=False)
+    start = np.zeros(lab.max() + 1, bool)
+    start[lab[near & (low > -deep)]] = True
+    return near & start[lab]
 
 
 def _cut(pts: np.ndarray, under: np.ndarray, band_frac: float, inside: np.ndarray) -> np.ndarray | None:
@@ -288,8 +386,11 @@ def _cut(pts: np.ndarray, under: np.ndarray, band_frac: float, inside: np.ndarra
     The trunk's spread is the narrowest of the slices ``band_frac`` / 3 thick from ``band_frac`` to
     6 ``band_frac`` above the ground (low branches widen some), or to 10 ``band_frac`` when the ground is
     not wider than that (grass as tall as 6 ``band_frac``). Cut: everything below the first slice
-    from ``band_frac`` up that is trunk-wide again (at most twice the trunk's spread), grass, a rough
-    surface and points under the ground with it.
+    from ``band_frac`` up that is trunk-wide again (at most twice the trunk's spread), grass, shrubs, a
+    rough surface and points under the ground with it, but for the trunk above ``band_frac``: the points
+    within twice that slice's spread of its median (understory shrubs cut the trunk with them, and the
+    root went 5.5-6 % of the height up it). No ground holds fewer than ``GROUND_SHARE`` of the points
+    within ``band_frac`` / 2 of it.
     """
     up = pts[:, 2] - under  # height above the ground
     step = band_frac * float(up[inside].max()) / 3  # of the tree's height: a slope's rise is not the tree's
@@ -299,14 +400,23 @@ def _cut(pts: np.ndarray, under: np.ndarray, band_frac: float, inside: np.ndarra
     def spread(k: int) -> float:
         return _spread(pts[near[slab == k]])
 
-    trunk = min(spread(k) for k in range(3, 18))
-    wide = _spread(pts[np.abs(up) < 1.5 * step])
-    if wide < GROUND_WIDER * trunk:  # grass up to 9 % of the height: the trunk shows above it
-        trunk = min(trunk, *(spread(k) for k in range(18, 30)))
+    slices = {k: spread(k) for k in range(3, 18)}
+    band = np.abs(up) < 1.5 * step
+    wide = _spread(pts[band])
+    if wide < GROUND_WIDER * min(slices.values()):  # grass up to 9 % of the height: the trunk shows above it
+        slices.update({k: spread(k) for k in range(18, 30)})
+    trunk = min(slices.values())
     if (up < -1.5 * step).sum() > GROUND_BELOW * len(pts) or not np.isfinite(trunk) or wide < GROUND_WIDER * trunk:
         return None
-    cut = next((k for k in range(3, 30) if spread(k) < 2 * trunk), 3)
-    return up < cut * step
+    if band.sum() < GROUND_SHARE * len(pts):
+        return None
+    cut = next((k for k in range(3, 30) if slices.get(k, spread(k)) < 2 * trunk), 3)
+    ground = up < cut * step
+    if cut >= 6:  # shrubs or grass round the trunk, twice the band tall: the trunk in them is kept
+        ring = pts[near[slab == cut]]
+        centre, reach = np.median(ring[:, :2], axis=0), 2 * spread(cut)
+        ground &= ~((up >= 3 * step) & (((pts[:, :2] - centre) ** 2).sum(axis=1) < reach ** 2))
+    return ground
 
 
 def prepare(
