@@ -37,7 +37,7 @@ from arboretum_library.progress import ProgressFn, no_progress
 
 from .plan import plan, scan_stem
 from .scans import expand_scans
-from .signals import sigterm_waits, workers_ignore_sigint
+from .signals import sigint_waits, sigterm_waits
 from .tasks import MALLOC_STATIC, WORKER_CONFIG, WORKER_ENV, ScanOutcome, decompose_scan
 from .waiting import Waiting, completed
 
@@ -276,6 +276,9 @@ class _Cluster:
                 self.client = Client(self.o.scheduler, timeout="5s")
             except OSError as exc:
                 raise InputError(f"cannot reach the Dask scheduler at {self.o.scheduler} ({exc})") from None
+            except Exception as exc:  # noqa: BLE001 - an answer Dask cannot read: a 3 EiB MemoryError for HTTP
+                raise InputError(f"--scheduler {self.o.scheduler}: what answers there is not a Dask scheduler "
+                                 f"({type(exc).__name__})") from None
             n = len(self.client.scheduler_info().get("workers", {}))
             return self.client, self.o.scheduler, n
         import dask
@@ -285,13 +288,13 @@ class _Cluster:
         # have left that variable (nannies os.environ.update() their pre-spawn environment): hide it.
         self.hidden = {k: os.environ.pop(k) for k in MALLOC_STATIC if k in os.environ}
         with dask.config.set({"distributed.nanny.pre-spawn-environ": dict(WORKER_ENV), **WORKER_CONFIG}), \
-                workers_ignore_sigint(), sigterm_waits():
+                sigint_waits(), sigterm_waits():
             # no dashboard; the scheduler's HTTP server (health, metrics) on a free port, so that another
             # cluster on port 8787 brings no "Port 8787 is already in use" warning
             self.cluster = LocalCluster(n_workers=self.o.workers, threads_per_worker=1, processes=True,
                                         dashboard_address=None,
                                         scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
-        self.client = Client(self.cluster)
+            self.client = Client(self.cluster)
         return self.client, "LocalCluster", self.o.workers
 
     def __exit__(self, kind, *exc) -> None:

@@ -1,9 +1,10 @@
 """Signals during ``library build``: Ctrl-C reaches the client alone, and SIGTERM stops a build as Ctrl-C does.
 
-A LocalCluster's worker processes start with SIGINT ignored (``workers_ignore_sigint``), so a Ctrl-C in
-the terminal, which reaches the whole process group, is handled by the client alone (it cancels the tasks
-and shuts the cluster down). The command turns SIGTERM into ``Terminated`` (``sigterm_stops``); one that
-comes while the cluster starts waits until it is up (``sigterm_waits``).
+A LocalCluster's worker processes start with SIGINT blocked (``sigint_waits``) and then ignore it, so a
+Ctrl-C in the terminal, which reaches the whole process group, is handled by the client alone (it cancels
+the tasks and shuts the cluster down). The command turns SIGTERM into ``Terminated`` (``sigterm_stops``).
+Either one that comes while the cluster starts waits until it is up and is then raised
+(``sigint_waits``, ``sigterm_waits``).
 """
 
 from __future__ import annotations
@@ -13,22 +14,33 @@ import signal
 import threading
 from collections.abc import Iterator
 
+from arboretum_library.signals import held
+
 
 @contextlib.contextmanager
-def workers_ignore_sigint() -> Iterator[None]:
-    """Ignore SIGINT while LocalCluster starts its worker processes, which keep ignoring it (an ignored
-    signal stays ignored across exec and Python then installs no KeyboardInterrupt handler): Ctrl-C in
-    the terminal reaches the whole process group, and only the client should handle it (cancel, shut the
-    cluster down) instead of every worker printing a KeyboardInterrupt traceback. A Ctrl-C during the
-    few seconds of start-up is lost. Outside the main thread (where signals cannot be set) a no-op."""
+def sigint_waits() -> Iterator[None]:
+    """Hold a Ctrl-C while the block starts the LocalCluster and its client, and raise it
+    (``KeyboardInterrupt``) when the block ends: raised inside the start, it would leave worker processes
+    behind. SIGINT is blocked in this thread for the block (``pthread_sigmask``), so the threads the start
+    creates (the cluster's event loop, the nannies' process starters) and the worker processes they spawn
+    inherit it blocked: a Ctrl-C in the terminal, which reaches the whole process group, stays pending in a
+    worker, unseen, until its preload ignores SIGINT (``tasks.dask_setup``), and only the client handles it
+    (cancel, shut the cluster down) instead of every worker printing a KeyboardInterrupt traceback.
+    SIGINT ignored (``SIG_IGN``) for the block, as before session 19, lost a Ctrl-C then; blocked in this
+    thread as well it was still lost (10 of 10): the client's 2 other threads at the start do not block it,
+    and the kernel gives it to one of them, which discards it. Here a handler notes it, whichever thread
+    takes it. Outside the main thread a no-op."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
+    with held(signal.SIGINT) as got:
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            yield
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)  # a pending Ctrl-C is noted in ``got`` here
+    if got:
+        raise KeyboardInterrupt
 
 
 class Terminated(KeyboardInterrupt):

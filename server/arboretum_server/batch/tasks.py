@@ -49,7 +49,7 @@ The preload runs ``dask_setup`` in every worker."""
 def dask_setup(worker: Any) -> None:
     """Run by Dask in each LocalCluster worker as it starts (``WORKER_CONFIG``'s preload): Ctrl-C is the
     client's to handle (it cancels the tasks and shuts the cluster down), so a worker ignores SIGINT (it
-    is started with SIGINT ignored too: ``signals.workers_ignore_sigint``) and does not warn about the
+    is started with SIGINT blocked: ``signals.sigint_waits``) and does not warn about the
     tasks cancelled then ("Async instruction ... ended with CancelledError"). It also has the worker
     freeze its heap after its first scan (``_freeze_once``)."""
     import logging
