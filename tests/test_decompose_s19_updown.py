@@ -51,3 +51,17 @@ def test_the_way_up_notes():
     wall[:, 1] = np.arange(10)  # after a Y turn every point lies at z = 0; the file's Z spread 9
     assert up_guess_flat(wall, "auto", "y-down").endswith("as written they spread 9 along Z")
     assert up_guess_flat(wall, "z", "y-down") is None
+
+
+def test_library_build_notes_and_keeps_the_turn(tmp_path, coffee):
+    from arboretum_server.batch.tasks import NOTES_KEY, decompose_scan
+    from arboretum_server.decompose.examples import UP_AXIS_KEY, file_sha256
+
+    down = tmp_path / "coffee_down.xyz"
+    write_points(down, turn_from_zup(coffee, "z-down"))
+    out = decompose_scan(str(down), file_sha256(down), {"points": 3000, "n_main": 3, "n_lobes": 6})
+    assert out.error == "" and len(out.examples) == 3
+    note = upside_down_note("auto", "z-down")
+    assert out.notes[0] == note
+    params = out.examples[0].provenance.parameters
+    assert params[UP_AXIS_KEY] == "z-down" and params[NOTES_KEY][0] == note

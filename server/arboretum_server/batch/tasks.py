@@ -152,7 +152,13 @@ def _decompose(path: str, sha256: str, options: dict[str, Any], t0: float) -> Sc
     from arboretum_library.errors import InputError
     from arboretum_library.pointio import precision_note, read_points
     from arboretum_server.decompose.examples import counter_ids, make_examples, provenance
-    from arboretum_server.decompose.notes import bare_note, refusal, result_notes, up_guess_flat
+    from arboretum_server.decompose.notes import (
+        bare_note,
+        refusal,
+        result_notes,
+        up_guess_flat,
+        upside_down_note,
+    )
     from arboretum_server.decompose.options import DecomposeOptions
     from arboretum_server.decompose.pipeline import decompose
 
@@ -176,7 +182,8 @@ def _decompose(path: str, sha256: str, options: dict[str, Any], t0: float) -> Sc
     if not examples:
         return _failed(path, sha256, "decomposition gave no examples (no main branch found)", t0)
     said = result_notes(opts, dec.stats)  # the species note would repeat for every scan of a species
-    said = ([coarse] if coarse else []) + said
+    turned = upside_down_note("auto", cloud.up_axis)  # kept with the notes: the examples stand turned
+    said = ([turned] if turned else []) + ([coarse] if coarse else []) + said
     params = {**prov.parameters, SCAN_EXAMPLES_KEY: len(examples), NOTES_KEY: list(said)}
     # examples without lobes: said when made, not stored with the notes (the user may delete those
     # examples, and a rerun would repeat a stale count); placeholder ids, so none named
