@@ -118,9 +118,10 @@ def fail(args: argparse.Namespace, code: int, message: str, word: str = "error: 
     """Tell the user why the command stops: one line on stderr (``arboretum CMD: error: MESSAGE``) and,
     under ``--json``, ``{"command", "error", "exit"}`` on stdout too, so a script that reads stdout as
     JSON gets JSON whatever happened; returns ``code``. ``word``: "" for an interruption."""
-    print(f"arboretum {args.command}: {word}{message}", file=sys.stderr, flush=True)
+    command = args.command or ""
+    print(f"{f'arboretum {command}'.rstrip()}: {word}{message}", file=sys.stderr, flush=True)
     if getattr(args, "json", False):
-        _json_failure(args.command, message, code)
+        _json_failure(command or "arboretum", message, code)
     return code
 
 
@@ -132,9 +133,14 @@ def _json_failure(command: str, message: str, code: int) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    _Parser.json_errors = "--json" in (sys.argv[1:] if argv is None else argv)
-    args = parser.parse_args(argv)
+    words = sys.argv[1:] if argv is None else argv
+    try:
+        parser = build_parser()
+        _Parser.json_errors = "--json" in words
+        args = parser.parse_args(argv)
+    except KeyboardInterrupt:  # while the commands register (numpy loads): a 28-44-line traceback before
+        command = next((w for w in words if not w.startswith("-")), "")
+        return fail(argparse.Namespace(command=command, json="--json" in words), 130, "interrupted", word="")
     if not getattr(args, "func", None):
         parser.print_help()
         return 1
