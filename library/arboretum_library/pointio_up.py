@@ -33,7 +33,7 @@ class UpGuess:
 def guess_up(points: np.ndarray) -> UpGuess:
     """Guess the way up of a tree: +Z, +Y, or either upside down (``UP_DIRECTIONS``).
 
-    For each axis the way up is found first (``_upside_down``: ground, else a trunk at the top end),
+    For each axis the way up is found first (``_upside_down``: ground at the top end with a trunk on it),
     then the axis is scored that way up with ``_upright_score``: log(elongation) - 0.75 log(trunk /
     width), where elongation is the robust extent along the axis (0.5-99.5 percentile) over the crown
     width across it (2 x the 95th percentile distance from the median), and trunk is the same width
@@ -146,15 +146,41 @@ def _upright_score(pts: np.ndarray, axis: int, ground: np.ndarray | None) -> flo
 
 def _upside_down(pts: np.ndarray, flipped: np.ndarray, axis: int, grounds: tuple) -> bool:
     """Whether the tree stands upside down along ``axis`` (``flipped``: ``pts`` with that axis negated;
-    ``grounds``: their ``_ground``). Ground decides first: the way whose ground lies under the rest
-    (``_ground_under``). Without ground, a trunk at the top end (``_trunk``) over a foot more than
-    ``FOOT_RATIO`` times wider does: a conifer's tip is narrow too, but it tapers, and a stem or the
-    lowest branches stand under it."""
+    ``grounds``: their ``_ground``): ground lies at the top end and not at the bottom (``_ground_under``;
+    a wall beside a tree is found from both ends), and a trunk stands on it: the narrowest
+    ``_foot_widths`` slice next to it under ``TRUNK_NARROW`` (grass, slopes and occlusion allowed; a
+    palm's or an umbrella pine's flat crown top read from above is a smooth, gentle surface too, with
+    crown under it). Where no trunk shows (a shrub, a tree with a pole, a skirt of branches), ground
+    reaching ``GROUND_WIDE`` times farther out than the rest along both axes across does (a wall's face,
+    long but lower than the tree, does not). Without ground the file is read as written: a trunk-like
+    top is also a conifer's bare leader, a dead top or a pole beside the tree (helper-136: that rule
+    turned 40 of 308 upright files without ground); ``trunk_on_top`` tells it for a note."""
     under = [_ground_under(p, axis, g) for p, g in zip((pts, flipped), grounds)]
-    if min(under) < GROUND_UNDER:
-        return bool(under[1] < under[0])
-    top = _foot_widths(flipped, axis)
-    return _trunk(top) and bool(_foot_widths(pts, axis).min() > FOOT_RATIO * top.max())
+    if not (under[1] < GROUND_UNDER <= under[0]):  # a wall found as ground from both ends: no way up
+        return False
+    rest = flipped[~grounds[1]]
+    if len(rest) == 0:
+        return False
+    if _foot_widths(rest, axis).min() < TRUNK_NARROW:
+        return True
+    across = np.delete(flipped, axis, axis=1)  # no trunk seen: ground reaching out beyond the rest both ways
+    ext = [np.subtract(*np.percentile(a, [97.5, 2.5], axis=0)) for a in (across[grounds[1]], across[~grounds[1]])]
+    return bool((ext[0] > GROUND_WIDE * ext[1]).all())
+
+
+def trunk_on_top(points: np.ndarray) -> bool:
+    """Whether a Z-up cloud (N, 3) may stand upside down though ``guess_up`` found no ground to say so:
+    no ground under it, and its top end is a trunk (``_trunk``: even, narrow slices) over a lowest end
+    more than ``FOOT_RATIO`` times wider. Also true of a conifer with a bare leader, a dead top or a pole
+    taller than the tree, so it only asks for a note, never a turn."""
+    pts = np.asarray(points, dtype=np.float64)
+    if len(pts) > 50_000:
+        pts = pts[np.random.default_rng(0).choice(len(pts), 50_000, replace=False)]
+    if len(pts) < 20 or _ground(pts, 2) is not None:
+        return False
+    flipped = pts * np.array([1.0, 1.0, -1.0])
+    top = _foot_widths(flipped, 2)
+    return _trunk(top) and bool(_foot_widths(pts, 2).min() > FOOT_RATIO * top.max())
 
 
 def _ground_under(pts: np.ndarray, axis: int, ground: np.ndarray | None) -> float:
@@ -187,6 +213,9 @@ def _trunk(widths: np.ndarray) -> bool:
     return bool(widths.max() < TRUNK_NARROW and widths.max() <= TRUNK_EVEN * widths.min())
 
 
+GROUND_WIDE = 1.3
+"""Ground at the top end with no trunk on it turns a cloud when it spans this many times more than the
+rest along both axes across (2.5-97.5 percentiles): ground round a shrub, not a wall's face."""
 GROUND_UNDER = 0.5
 """Ground lies under a tree when fewer than this share of the other points are below its median."""
 FOOT_STEP, FOOT_SLICES = 0.03, 3

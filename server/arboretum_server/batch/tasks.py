@@ -157,6 +157,7 @@ def _decompose(path: str, sha256: str, options: dict[str, Any], t0: float) -> Sc
         refusal,
         result_notes,
         up_guess_flat,
+        upside_down_doubt,
         upside_down_note,
     )
     from arboretum_server.decompose.options import DecomposeOptions
@@ -171,10 +172,11 @@ def _decompose(path: str, sha256: str, options: dict[str, Any], t0: float) -> Sc
     # the file's own precision, kept with the notes; by file name: the build's line names the path, and a
     # refusal is cut at 500 characters
     coarse = precision_note(replace(cloud, source=os.path.basename(path)), points=opts.points)
+    doubt = upside_down_doubt(cloud.points, cloud.up_axis, build=True)  # a trunk-like top and no ground
     try:
         dec = decompose(cloud.points, opts, labels=cloud.labels)
     except InputError as exc:  # on a coarse grid the refusal names the symptom: say the cause too
-        return _failed(path, sha256, refusal(str(exc), coarse, exc), t0)
+        return _failed(path, sha256, refusal(str(exc), coarse, exc, doubt), t0)
     t_dec = time.perf_counter()
     prov = provenance(path, opts, sha256=sha256)
     prov = replace(prov, parameters={**prov.parameters, UP_AXIS_KEY: cloud.up_axis})  # as decompose keeps it
@@ -182,8 +184,8 @@ def _decompose(path: str, sha256: str, options: dict[str, Any], t0: float) -> Sc
     if not examples:
         return _failed(path, sha256, "decomposition gave no examples (no main branch found)", t0)
     said = result_notes(opts, dec.stats)  # the species note would repeat for every scan of a species
-    turned = upside_down_note("auto", cloud.up_axis)  # kept with the notes: the examples stand turned
-    said = ([turned] if turned else []) + ([coarse] if coarse else []) + said
+    way = [n for n in (upside_down_note("auto", cloud.up_axis, build=True), doubt) if n]  # kept with the notes
+    said = way + ([coarse] if coarse else []) + said
     params = {**prov.parameters, SCAN_EXAMPLES_KEY: len(examples), NOTES_KEY: list(said)}
     # examples without lobes: said when made, not stored with the notes (the user may delete those
     # examples, and a rerun would repeat a stale count); placeholder ids, so none named

@@ -134,7 +134,7 @@ def _run(args: argparse.Namespace) -> int:
     from arboretum_library.progress import StatusLine
 
     from .examples import UP_AXIS_KEY, file_sha256, provenance
-    from .notes import bare_note, notes, upside_down_note
+    from .notes import bare_note, notes, upside_down_doubt, upside_down_note
 
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     options = _options(args)
@@ -157,7 +157,8 @@ def _run(args: argparse.Namespace) -> int:
                 emit(args, data, _text(data))
                 return 0
             coarse = precision_note(cloud, points=options.points)  # float32 at UTM: the points sit on a 0.5 m grid
-            dec = _decompose(args.scan, cloud, options, status, coarse)
+            doubt = upside_down_doubt(cloud.points, cloud.up_axis)  # a trunk-like top and no ground
+            dec = _decompose(args.scan, cloud, options, status, coarse, doubt)
             if args.save_hbl:
                 _save_hbl(args.save_hbl, dec.hbl)
             stored = _store(lib, dec, args.scan, prov, args.rebuild)
@@ -165,9 +166,9 @@ def _run(args: argparse.Namespace) -> int:
             late = done.enter_context(held(signal.SIGINT, signal.SIGTERM))
         data = _result(args, options, len(cloud.points), {"read": t_read, **dec.timing}, dec, stored, other)
         bare = bare_note(stored[0], named=bool(stored[1]))  # library ids name them; example-000 would not
-        turned = upside_down_note(args.up, cloud.up_axis)
-        data["notes"] = ([turned] if turned else []) + ([coarse] if coarse else []) + notes(options, dec.stats) \
-            + data["notes"] + ([bare] if bare else [])
+        way = [n for n in (upside_down_note(args.up, cloud.up_axis), doubt) if n]
+        data["notes"] = way + ([coarse] if coarse else []) + notes(options, dec.stats) + data["notes"] \
+            + ([bare] if bare else [])
         emit(args, data, _text(data))
     if late:
         tell(f"arboretum {args.command}: {'Ctrl-C' if late[0] == signal.SIGINT else 'SIGTERM'} came after the "
@@ -252,7 +253,7 @@ def _library(path: str | None):
         raise
 
 
-def _decompose(scan: str, cloud, options, status, coarse: str | None):
+def _decompose(scan: str, cloud, options, status, coarse: str | None, doubt: str | None):
     from arboretum_library.errors import InputError
 
     from .notes import refusal
@@ -261,7 +262,7 @@ def _decompose(scan: str, cloud, options, status, coarse: str | None):
     try:
         return decompose(cloud.points, options, status, labels=cloud.labels)
     except InputError as exc:
-        raise InputError(refusal(f"{scan}: {exc}", coarse, exc)) from None
+        raise InputError(refusal(f"{scan}: {exc}", coarse, exc, doubt)) from None
 
 
 def _save_hbl(path: str, hbl) -> None:

@@ -46,25 +46,46 @@ def bare_note(examples: list, named: bool = False) -> str | None:
     return f"{len(bare)} of {len(examples)} examples have no lobes{ids}: they grow no twigs or leaves"
 
 
-def refusal(message: str, coarse: str | None, error: Exception | None = None) -> str:
+def refusal(message: str, coarse: str | None, error: Exception | None = None, doubt: str | None = None) -> str:
     """A refusal ``message`` with the file's precision note ``coarse`` (``pointio.precision_note``) when
     it has one and the refusal is about the points (not a ``preprocess.OptionError``): a float32 scan at
     UTM coordinates sits on a 0.5 m grid and is refused as "2 separate trunks" or "no trunk base", which
-    names the symptom, not the cause."""
+    names the symptom, not the cause. ``doubt`` (``upside_down_doubt``) likewise: a tree read upside
+    down has no trunk base."""
     from .preprocess import OptionError
 
-    if not coarse or isinstance(error, OptionError):
+    if isinstance(error, OptionError):
         return message
-    return f"{message}; the file's precision may be why: {coarse}"
+    said = [message] + ([f"the file's precision may be why: {coarse}"] if coarse else []) + ([doubt] if doubt else [])
+    return "; ".join(said)
 
 
-def upside_down_note(up_asked: str, up_read: str) -> str | None:
+_OTHER_WAY = {"z": "z-down", "y": "y-down", "z-down": "z", "y-down": "y"}
+
+
+def upside_down_note(up_asked: str, up_read: str, build: bool = False) -> str | None:
     """The note for a file ``--up auto`` found standing upside down (``up_read`` 'z-down' or 'y-down',
-    ``pointio_up.guess_up``) and turned the right way up, else None."""
+    ``pointio_up.guess_up``: ground at its top with a trunk on it) and turned the right way up, else
+    None. ``build``: for ``library build``, which has no ``--up``."""
     if up_asked != "auto" or not up_read.endswith("-down"):
         return None
-    return (f"--up auto found the file upside down (its trunk at the top) and turned it the right way up "
-            f"(--up {up_read}); pass --up {up_read[0]} to read it as written")
+    how = f"decompose it alone with --up {up_read[0]}" if build else f"pass --up {up_read[0]}"
+    return (f"--up auto found the file upside down (its ground at the top) and turned it the right way up "
+            f"(--up {up_read}); to read it as written, {how}")
+
+
+def upside_down_doubt(points_zup, up_read: str, build: bool = False) -> str | None:
+    """A note when the cloud as read (Z up, ``up_read``) may stand upside down but no ground says so
+    (``pointio_up.trunk_on_top``: a trunk-like top over a much wider foot; a conifer's bare leader, a dead
+    top or a pole beside the tree look the same, so ``--up auto`` never turns such a file), else None."""
+    from arboretum_library.pointio_up import trunk_on_top
+
+    if not trunk_on_top(points_zup):
+        return None
+    other = _OTHER_WAY[up_read]
+    how = f"decompose it alone with --up {other}" if build else f"pass --up {other}"
+    return (f"the tree may stand upside down as read (--up {up_read}): its top is trunk-like over a much "
+            f"wider foot and no ground tells which way is up; if the file is upside down, {how}")
 
 
 def up_guess_flat(points_zup, up_asked: str, up_read: str) -> str | None:
