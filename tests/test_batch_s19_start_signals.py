@@ -99,6 +99,14 @@ def test_local_workers_start_with_sigint_blocked_and_then_ignore_it():
     assert list(seen.values()) == [(True, True)]
 
 
+def _hold(conn) -> None:
+    """Keep a connection open until the other side closes it (or resets it)."""
+    try:
+        conn.recv(1)
+    except OSError:
+        pass
+
+
 def test_a_scheduler_address_answering_http_is_one_line(tmp_path, capsys):
     """Before, Dask read "HTTP/1.1" as a frame length and the build ended in a 53-line traceback of a
     MemoryError ("Unable to allocate 3.07 EiB"), exit 1."""
@@ -108,10 +116,14 @@ def test_a_scheduler_address_answering_http_is_one_line(tmp_path, capsys):
     server = socket.create_server(("127.0.0.1", 0))
     port = server.getsockname()[1]
 
-    def answer() -> None:
-        conn, _ = server.accept()
-        conn.sendall(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n")
-        conn.recv(1)  # held open until the client closes it
+    def answer() -> None:  # every connection: the probe's (``build._probe``), then Dask's
+        while True:
+            try:
+                conn, _ = server.accept()
+            except OSError:  # closed
+                return
+            conn.sendall(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n")
+            threading.Thread(target=_hold, args=(conn,), daemon=True).start()
 
     threading.Thread(target=answer, daemon=True).start()
     lib = tmp_path / "L"
@@ -122,4 +134,25 @@ def test_a_scheduler_address_answering_http_is_one_line(tmp_path, capsys):
     assert capsys.readouterr().err.strip().splitlines() == [
         f"arboretum library: error: --scheduler tcp://127.0.0.1:{port}: what answers there is not a Dask scheduler "
         "(MemoryError)"]
+    assert not lib.exists()
+
+
+def test_a_scheduler_address_that_never_answers_is_one_line(tmp_path, capsys, monkeypatch):
+    """A port that accepts and never speaks: Dask's client waited for its handshake with no deadline,
+    and the build hung until killed (helper-134: 10 minutes, then SIGTERM)."""
+    import socket
+
+    from arboretum_server.batch import build
+
+    monkeypatch.setattr(build, "PROBE_SECONDS", 0.3)
+    server = socket.create_server(("127.0.0.1", 0))  # the kernel accepts into its backlog; nobody speaks
+    port = server.getsockname()[1]
+    lib = tmp_path / "L"
+    try:
+        assert main(["library", "build", SCANS[0], "--library", str(lib), "--scheduler", f"tcp://127.0.0.1:{port}"]) == 2
+    finally:
+        server.close()
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"arboretum library: error: --scheduler tcp://127.0.0.1:{port}: nothing answered within 0.3 s; a Dask "
+        "scheduler speaks as soon as it accepts a connection"]
     assert not lib.exists()

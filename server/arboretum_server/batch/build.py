@@ -252,6 +252,39 @@ def _status(result: BuildResult, done: int, total: int) -> str:
     return f"building {done}/{total} scans" + (f" ({failed} failed)" if failed else "")
 
 
+PROBE_SECONDS = 5.0
+"""How long ``_probe`` waits for a ``--scheduler`` address to connect and to speak first."""
+
+
+def _probe(address: str) -> None:
+    """InputError unless what listens at a tcp:// ``address`` speaks within ``PROBE_SECONDS``: a Dask
+    scheduler sends its handshake as it accepts a connection, while Dask's client waits for it with no
+    deadline (distributed 2026.8, ``comm.core.connect``), so a port that accepted and never answered hung
+    the build for good (helper-134). Other protocols, and addresses that refuse or cannot be reached, are
+    left to Dask's own errors."""
+    import socket
+    from urllib.parse import urlsplit
+
+    if "://" in address and not address.startswith("tcp://"):
+        return
+    try:
+        url = urlsplit(address if "://" in address else f"tcp://{address}")
+        host, port = url.hostname, url.port
+    except ValueError:
+        return
+    if not host or not port:
+        return
+    try:
+        with socket.create_connection((host, port), timeout=PROBE_SECONDS) as sock:
+            sock.settimeout(PROBE_SECONDS)
+            sock.recv(1)
+    except TimeoutError:
+        raise InputError(f"--scheduler {address}: nothing answered within {PROBE_SECONDS:g} s; a Dask scheduler "
+                         "speaks as soon as it accepts a connection") from None
+    except OSError:
+        return
+
+
 class _Cluster:
     """Context manager: (dask Client, description, worker count) on a LocalCluster or a scheduler."""
 
@@ -272,6 +305,7 @@ class _Cluster:
         from distributed import Client, LocalCluster
 
         if self.o.scheduler:
+            _probe(self.o.scheduler)
             try:
                 self.client = Client(self.o.scheduler, timeout="5s")
             except OSError as exc:
