@@ -126,15 +126,9 @@ def test_a_scheduler_address_answering_http_is_one_line(tmp_path, capsys):
             threading.Thread(target=_hold, args=(conn,), daemon=True).start()
 
     threading.Thread(target=answer, daemon=True).start()
-    lib = tmp_path / "L"
-    try:
-        assert main(["library", "build", SCANS[0], "--library", str(lib), "--scheduler", f"tcp://127.0.0.1:{port}"]) == 2
-    finally:
-        server.close()
-    assert capsys.readouterr().err.strip().splitlines() == [
+    assert _build_against(server, tmp_path, capsys) == [
         f"arboretum library: error: --scheduler tcp://127.0.0.1:{port}: what answers there is not a Dask scheduler "
         "(MemoryError)"]
-    assert not lib.exists()
 
 
 def test_a_scheduler_address_that_never_answers_is_one_line(tmp_path, capsys, monkeypatch):
@@ -147,12 +141,18 @@ def test_a_scheduler_address_that_never_answers_is_one_line(tmp_path, capsys, mo
     monkeypatch.setattr(build, "PROBE_SECONDS", 0.3)
     server = socket.create_server(("127.0.0.1", 0))  # the kernel accepts into its backlog; nobody speaks
     port = server.getsockname()[1]
-    lib = tmp_path / "L"
+    assert _build_against(server, tmp_path, capsys) == [
+        f"arboretum library: error: --scheduler tcp://127.0.0.1:{port}: nothing answered within 0.3 s; a Dask "
+        "scheduler speaks as soon as it accepts a connection"]
+
+
+def _build_against(server, tmp_path, capsys) -> list[str]:
+    """stderr's lines of a build given ``server``'s address as --scheduler, which must fail (exit 2)
+    without making the library; the server is closed after."""
+    port, lib = server.getsockname()[1], tmp_path / "L"
     try:
         assert main(["library", "build", SCANS[0], "--library", str(lib), "--scheduler", f"tcp://127.0.0.1:{port}"]) == 2
     finally:
         server.close()
-    assert capsys.readouterr().err.strip().splitlines() == [
-        f"arboretum library: error: --scheduler tcp://127.0.0.1:{port}: nothing answered within 0.3 s; a Dask "
-        "scheduler speaks as soon as it accepts a connection"]
     assert not lib.exists()
+    return capsys.readouterr().err.strip().splitlines()
