@@ -45,3 +45,11 @@ def folders(tmp_path):
     from factories import service_folders
 
     return service_folders(tmp_path)
+
+
+@pytest.fixture(scope="session")
+def toy_tree():
+    """The ground tests' tree: the toy tree's leaf-off toy scan (seed 5) and its height."""
+    from factories import toy_tree_scan
+
+    return toy_tree_scan()

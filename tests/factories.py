@@ -335,3 +335,21 @@ def hbl_arrays(d) -> list:
     for lb in hbl.lobes:
         out += [lb.points, lb.hull_vertices, lb.hull_faces, lb.centre, np.array([lb.branch])]
     return out
+
+
+def toy_tree_scan() -> tuple[np.ndarray, float]:
+    """The toy tree's leaf-off toy scan (seed 5) and its height: the ground tests' tree."""
+    from arboretum_server.decompose.toytree import toy_scan, toy_truth
+
+    pts, _ = toy_scan(toy_truth(), leaf_fraction=0.0, seed=5)
+    return pts, float(np.ptp(pts[:, 2]))
+
+
+def ground_disc(tree: tuple[np.ndarray, float], surface, n: int, radius: float = 1.5, seed: int = 0) -> np.ndarray:
+    """``n`` ground points on a disc ``radius`` heights round the trunk of ``tree`` (``toy_tree_scan``), at
+    ``surface(x, y)`` (in heights) above the tree's lowest point."""
+    pts, h = tree
+    rng = np.random.default_rng(seed)
+    r, a = radius * h * np.sqrt(rng.uniform(0, 1, n)), rng.uniform(0, 2 * np.pi, n)
+    x, y = r * np.cos(a), r * np.sin(a)
+    return np.c_[x, y, pts[:, 2].min() + h * surface(x / h, y / h)]

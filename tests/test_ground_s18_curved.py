@@ -11,26 +11,19 @@ import pytest
 from arboretum_server.decompose.options import DecomposeOptions
 from arboretum_server.decompose.pipeline import decompose
 from arboretum_server.decompose.preprocess import body_span, find_ground
-from arboretum_server.decompose.toytree import toy_scan, toy_truth
+from factories import ground_disc
 
 N_GROUND = 8000
 SCAN_10 = Path(__file__).resolve().parents[1] / "assets" / "scans" / "10_treels_pine" / "10_treels_pine.xyz"
 
 
-@pytest.fixture(scope="module")
-def tree():
-    pts, _ = toy_scan(toy_truth(), leaf_fraction=0.0, seed=5)
-    return pts, float(np.ptp(pts[:, 2]))
+@pytest.fixture
+def tree(toy_tree):
+    return toy_tree
 
 
-def _disc(tree, surface, n=N_GROUND, radius=1.5, seed=0):
-    """``n`` ground points on a disc ``radius`` heights round the trunk, at ``surface(x, y)`` (in
-    heights) above the tree's lowest point."""
-    pts, h = tree
-    rng = np.random.default_rng(seed)
-    r, a = radius * h * np.sqrt(rng.uniform(0, 1, n)), rng.uniform(0, 2 * np.pi, n)
-    x, y = r * np.cos(a), r * np.sin(a)
-    return np.c_[x, y, pts[:, 2].min() + h * surface(x / h, y / h)]
+def _disc(tree, surface, n=N_GROUND, seed=0):
+    return ground_disc(tree, surface, n, seed=seed)
 
 
 def _check(tree, cloud, n_ground=N_GROUND):

@@ -3,35 +3,28 @@ the trunk and ditches deeper than 3 % of the height. Until session 19 scan 10 wi
 outliers kept its ground (the root 4 m under it), shrubs cut the trunk with them (the root 5.5-6 % of the
 height up it), and a ditch 4 % deep and wide, or 8 % deep, was refused with "no trunk base"."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from arboretum_library.assets import sample_scans
 from arboretum_library.errors import InputError
 from arboretum_server.decompose.options import DecomposeOptions
 from arboretum_server.decompose.pipeline import decompose
 from arboretum_server.decompose.preprocess import find_ground
-from arboretum_server.decompose.toytree import toy_scan, toy_truth
+from factories import ground_disc
 
 N_GROUND = 20000
-SCAN_10 = Path(__file__).resolve().parents[1] / "assets" / "scans" / "10_treels_pine" / "10_treels_pine.xyz"
+SCAN_10 = sample_scans()[3]
 
 
-@pytest.fixture(scope="module")
-def tree():
-    pts, _ = toy_scan(toy_truth(), leaf_fraction=0.0, seed=5)
-    return pts, float(np.ptp(pts[:, 2]))
+@pytest.fixture
+def tree(toy_tree):
+    return toy_tree
 
 
-def _disc(tree, surface, n=N_GROUND, radius=1.5, seed=0):
-    """``n`` ground points on a disc ``radius`` heights round the trunk, at ``surface(x, y)`` (in
-    heights) above the tree's lowest point."""
-    pts, h = tree
-    rng = np.random.default_rng(seed)
-    r, a = radius * h * np.sqrt(rng.uniform(0, 1, n)), rng.uniform(0, 2 * np.pi, n)
-    x, y = r * np.cos(a), r * np.sin(a)
-    return np.c_[x, y, pts[:, 2].min() + h * surface(x / h, y / h)]
+def _disc(tree, surface, n=N_GROUND, seed=0):
+    return ground_disc(tree, surface, n, seed=seed)
 
 
 @pytest.mark.parametrize("share", [0.01, 0.02, 0.03])
