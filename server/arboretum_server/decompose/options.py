@@ -118,7 +118,7 @@ class DecomposeOptions:
     """Edge-weight factor for edges that touch leaf points when routing the main branches (wood preferred)."""
     ground_band: float = 0.015
     """Ground, as a fraction of the scan height (0.3 m of 20 m): points within half of it of the ground
-    plane sample the ground, and at least this much above the plane is cut (``preprocess.find_ground``)."""
+    plane sample the ground, and at least this much above the plane is cut (``ground.find_ground``)."""
     use_labels: bool = True
     """Use leaf/wood labels given with the input instead of the separation heuristic."""
     leaf_off: bool = False

@@ -1,0 +1,378 @@
+"""Ground under a scanned tree (VRTree Appendix A: "remove the ground when present"): ``find_ground`` cuts a
+plane, or a gently curved surface, with the dips of a ditch, grass, shrubs round the trunk and strays
+below it, and refuses a crown's underside or a drooping crown. Split out of ``preprocess`` (session 19),
+which calls it; docs/decomposition.md, "Ground", has the rules and what was measured.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .trunkbase import plan_radius
+
+GROUND_CELL = 0.02
+"""Ground search: the lowest point of each xy column this wide (fraction of the height) samples it."""
+GROUND_TILT = 0.5
+"""Steepest ground slope searched (rise over run: 27 degrees)."""
+GROUND_TRIES = 200
+"""RANSAC triples tried for the ground plane."""
+GROUND_SAMPLE = 5000
+"""RANSAC scores a plane on at most this many column minima (a wide scan has tens of thousands)."""
+GROUND_WIDER = 3.0
+"""The ground spreads at least this many times wider than the trunk just above it."""
+GROUND_BELOW = 0.01
+"""At most this fraction of the points lies below the ground (a plane through the underside of a crown
+has the trunk below it)."""
+GROUND_EDGE = 0.01
+"""Far strays are looked for among this share of the lowest and of the highest points (``body_span``)."""
+GROUND_FAR = 0.1
+"""A gap in z wider than this fraction of the rest's span sets the points beyond it apart (``body_span``)."""
+GROUND_SPAN = 1.1
+"""The span of z the ground search scales by is at most this many times the 0.1-99.9 percentile span
+(``body_span``: outliers strewn above and below the tree, with no gap)."""
+GROUND_DIP = 0.03
+"""When neither surface is accepted, each column of the ground follows its lowest point down to this
+fraction of the height below it (a ditch 1 % deep held more than ``GROUND_BELOW`` of the points)."""
+GROUND_HELD = 2
+"""``held``: a column's ground sample has this many points of its column just above it."""
+GROUND_DITCH = 0.1
+"""``_dips`` follows a column deeper than ``GROUND_DIP`` down to this fraction of the height below the
+ground when a chain of columns, each at most ``GROUND_WALL`` deeper than the last, leads to it from a
+shallow one (a ditch 4 % deep and wide, or 8 % deep, was refused with "no trunk base")."""
+GROUND_WALL = 1.0
+"""Steepest rise over run between neighbouring columns that ``_dips`` follows down (45 degrees)."""
+GROUND_SHARE = 0.005
+"""A ground holds at least this share of the points within half of ``ground_band`` of it (scan 10's
+patch 2.5 m wide: 3.8 %; the floor of 3 % outliers strewn in a box under it, whose sparse slices made
+the real ground the "trunk": 0.04 %)."""
+GROUND_GAIN = 0.05
+"""A curved ground is tried before the plane when it fits this share of the column minima more."""
+GROUND_BEND = 0.15
+"""A curved ground rises or falls at most this fraction of the height from its plane part."""
+
+
+def _spread(q: np.ndarray) -> float:
+    """Median plan-view distance of ``q`` (M, 3) from its median; inf for fewer than 5 points."""
+    return np.inf if len(q) < 5 else plan_radius(q, 50)
+
+
+def body_span(z: np.ndarray) -> tuple[float, float]:
+    """Lowest and highest z of ``z`` (N,) once far strays are set apart: among the lowest and the highest
+    ``GROUND_EDGE`` of the values, a gap wider than ``GROUND_FAR`` of the span between them sets apart
+    everything beyond it (a bird 30 m above a 5 m tree made the ground search's cells and band six times
+    too coarse); and neither end lies more than ``GROUND_SPAN`` times the 0.1-99.9 percentile span from
+    the other's percentile. Without such strays: the min and the max."""
+    zs = np.sort(z)
+    n = len(zs)
+    k = max(1, int(GROUND_EDGE * n))
+    if n < 2 * k + 2:
+        return float(zs[0]), float(zs[-1])
+    far = GROUND_FAR * float(zs[n - 1 - k] - zs[k])
+    top = np.flatnonzero(np.diff(zs[n - 1 - k:]) > far)
+    bottom = np.flatnonzero(np.diff(zs[:k + 1]) > far)
+    hi = zs[n - 1 - k + top[0]] if len(top) else zs[-1]
+    lo = zs[bottom[-1] + 1] if len(bottom) else zs[0]
+    p_lo, p_hi = zs[int(0.001 * (n - 1))], zs[int(np.ceil(0.999 * (n - 1)))]
+    reach = GROUND_SPAN * (p_hi - p_lo)
+    return float(max(lo, p_hi - reach)), float(min(hi, p_lo + reach))
+
+
+def lowest_per_cell(pts: np.ndarray, cell: float) -> np.ndarray:
+    """The lowest point (M, 3) of ``pts`` (N, 3) in each ``cell`` x ``cell`` column of the xy plane
+    (columns widened so that no axis holds more than 2 ** 20 of them)."""
+    order, first = _columns_low_first(pts[:, :2], pts[:, 2], cell)
+    return pts[order[first]]
+
+
+def _columns_low_first(xy: np.ndarray, z: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """(order, first): the points ``xy`` (N, 2) sorted by ``cell``-wide column and then by ``z`` (N,), and
+    (N,) bool marking each column's first, lowest one. Columns are widened so that no axis holds more
+    than 2 ** 20 of them (a cloud far wider than tall overflowed the int64 keys)."""
+    cell = max(cell, float(np.ptp(xy, axis=0).max()) / 2 ** 20, 1e-300)
+    key = np.floor((xy - xy.min(axis=0)) / cell).astype(np.int64)
+    key = key[:, 0] * (int(key[:, 1].max()) + 1) + key[:, 1]
+    order = np.lexsort((z, key))
+    return order, np.r_[True, key[order][1:] != key[order][:-1]]
+
+
+def held(z: np.ndarray, order: np.ndarray, first: np.ndarray, gap: float) -> tuple[np.ndarray, np.ndarray]:
+    """(order, first) of ``_columns_low_first`` (``order``, ``first``: over heights ``z`` (N,)) kept to the
+    points that have ``GROUND_HELD`` more points of their column within ``gap`` above them (a lone
+    outlier has none): each column's ``first`` is then its lowest such point."""
+    col = np.cumsum(first) - 1
+    zs = z[order]
+    k = GROUND_HELD
+    ok = np.zeros(len(zs), bool)
+    ok[:-k] = (col[k:] == col[:-k]) & (zs[k:] - zs[:-k] < gap)
+    col = col[ok]
+    return order[ok], np.r_[True, col[1:] != col[:-1]] if len(col) else np.zeros(0, bool)
+
+
+@dataclass(frozen=True, eq=False)
+class Ground:
+    """The ground under a tree: the plane z = a x + b y + c, bent by a quadratic about ``centre`` when one
+    plane does not fit it (a bowl, a dome, a valley)."""
+
+    plane: np.ndarray
+    """(3,) a, b, c."""
+    bend: np.ndarray | None = None
+    """(3,) the x², x y and y² terms about ``centre``, or None for a plane."""
+    centre: np.ndarray | None = None
+    """(2,) x, y the bend is measured from."""
+
+    def height(self, xy: np.ndarray) -> np.ndarray:
+        """(N,) the ground's z under ``xy`` (N, 2)."""
+        z = xy @ self.plane[:2] + self.plane[2]
+        if self.bend is None:
+            return z
+        d = xy - self.centre
+        return z + d[:, 0] ** 2 * self.bend[0] + d[:, 0] * d[:, 1] * self.bend[1] + d[:, 1] ** 2 * self.bend[2]
+
+
+def ground_plane(low: np.ndarray, tol: float) -> np.ndarray | None:
+    """(a, b, c) of the ground z = a x + b y + c through the column minima ``low`` (M, 3), or None.
+
+    RANSAC (``GROUND_TRIES`` triples, a fixed seed; scored on at most ``GROUND_SAMPLE`` of ``low``): the
+    plane, at most ``GROUND_TILT`` steep, that most minima lie within ``tol`` of, refitted by least
+    squares to all of them that do.
+    """
+    if len(low) < 20:
+        return None
+    rng = np.random.default_rng(0)  # its own: the downsampling stream stays as it was
+    some = low if len(low) <= GROUND_SAMPLE else low[rng.choice(len(low), GROUND_SAMPLE, replace=False)]
+    best, best_n = None, 0
+    for _ in range(GROUND_TRIES):
+        a, b, c = some[rng.choice(len(some), 3, replace=False)]
+        n = np.cross(b - a, c - a)
+        norm = float(np.linalg.norm(n))
+        if norm == 0 or abs(n[2]) < norm / np.hypot(1.0, GROUND_TILT):
+            continue
+        k = int((np.abs((some - a) @ n) < tol * norm).sum())
+        if k > best_n:
+            best_n, best = k, (a, n / norm)
+    if best is None or best_n < 20:
+        return None
+    on = np.abs((low - best[0]) @ best[1]) < tol
+    coef, *_ = np.linalg.lstsq(np.c_[low[on, :2], np.ones(int(on.sum()))], low[on, 2], rcond=None)
+    return coef
+
+
+def ground_curve(low: np.ndarray, plane: np.ndarray, tol: float, h: float) -> Ground | None:
+    """The quadratic ground through the column minima ``low`` (M, 3) grown from ``plane``: fitted by least
+    squares to the minima within 8, 4, 2, then 1 ``tol`` of the last fit (a bowl 4.5 % of the height
+    deep leaves only a ring of minima within ``tol`` of one plane), or None when it bends more than
+    ``GROUND_BEND`` of ``h`` over the minima it fits or fits fewer than 20."""
+    centre = np.median(low[:, :2], axis=0)
+    d = (low[:, :2] - centre) / h  # scaled: a georeferenced x squared loses its digits
+    design = np.c_[d, np.ones(len(low)), d[:, 0] ** 2, d[:, 0] * d[:, 1], d[:, 1] ** 2]
+    fit = low[:, :2] @ plane[:2] + plane[2]
+    on = np.zeros(len(low), bool)
+    for reach in (8, 4, 2, 1):
+        on = np.abs(low[:, 2] - fit) < reach * tol
+        if on.sum() < 20:
+            return None
+        a = design[on]
+        coef, *_ = np.linalg.lstsq(a.T @ a, a.T @ low[on, 2], rcond=None)  # the normal equations: quick
+        fit = design @ coef
+    bend = coef[3:] / h ** 2
+    if np.ptp(design[on, 3:] @ coef[3:]) > GROUND_BEND * h:
+        return None
+    slope = coef[:2] / h
+    return Ground(np.r_[slope, coef[2] - centre @ slope], bend, centre)
+
+
+def find_ground(pts: np.ndarray, band_frac: float) -> tuple[np.ndarray, Ground | None]:
+    """(N,) bool ground points of ``pts`` (N, 3), flat, sloped or curved, and the ``Ground`` or None when
+    there is no ground.
+
+    Scales come from the points between ``body_span``'s (far strays aside) and the ground is sampled by
+    the lowest point of each ``GROUND_CELL`` column of them (``lowest_per_cell``; ``_surface`` fits and
+    checks it). When that finds none and those points reach a column width or more lower than the ones
+    with ``GROUND_HELD`` others of their column just above them (``held``), the columns are sampled once
+    more by their lowest held point, with the scales taken from the held points: outliers strewn under a
+    small ground were the minima of most columns and stretched the span (scan 10, its ground 2.5 m wide,
+    with 1-3 % uniform outliers: its ground was kept, the root 4 m under it). When that finds none either,
+    a surface holding fewer than ``GROUND_SHARE`` of the points is taken after all: the floor of
+    outliers strewn under a tree with no ground, cut with the strays below the tree (scan 07 with
+    1.5-3 % of them: the root 20-23 % of the height too low in 8 of 12 draws without it).
+    """
+    none = np.zeros(len(pts), bool), None
+    lo, hi = body_span(pts[:, 2])
+    h = hi - lo
+    if h <= 0:
+        return none
+    inside = (pts[:, 2] >= lo) & (pts[:, 2] <= hi)
+    body = pts if inside.all() else pts[inside]
+    order, first = _columns_low_first(body[:, :2], body[:, 2], GROUND_CELL * h)
+    low = body[order[first]]
+    found = _surface(pts, low, band_frac, inside, h)
+    if found[1] is None:
+        found = _held_surface(pts, body, order, first, band_frac, lo, hi)
+    if found[1] is None:  # no ground but maybe the sparse floor of strays under the tree
+        found = _surface(pts, low, band_frac, inside, h, share=0.0)
+    return found
+
+
+def _held_surface(pts: np.ndarray, body: np.ndarray, order: np.ndarray, first: np.ndarray, band_frac: float,
+                  lo: float, hi: float) -> tuple[np.ndarray, Ground | None]:
+    """``find_ground``'s second try: ``_surface`` through the lowest ``held`` point of each column, the
+    scales taken from the held points of ``body`` (M, 3) (``order``, ``first``: its columns, lowest
+    first; ``lo``, ``hi``: its span), or no points and None when no outliers lie below them."""
+    none = np.zeros(len(pts), bool), None
+    h = hi - lo
+    order, first = held(body[:, 2], order, first, band_frac * h / 2)
+    if first.sum() < 20:
+        return none
+    lo_held, hi = body_span(body[order, 2])  # the outliers' few held points aside
+    if lo_held - lo < GROUND_CELL * h:  # nothing strewn below the cloud: no other ground to find
+        return none
+    lo, h = lo_held, hi - lo_held
+    inside = (pts[:, 2] >= lo) & (pts[:, 2] <= hi)
+    body = pts[inside]
+    order, first = _columns_low_first(body[:, :2], body[:, 2], GROUND_CELL * h)
+    order, first = held(body[:, 2], order, first, band_frac * h / 2)
+    if first.sum() < 20:
+        return none
+    found = _surface(pts, body[order[first]], band_frac, inside, h)
+    return found if found[1] is not None else none
+
+
+def _surface(pts: np.ndarray, low: np.ndarray, band_frac: float, inside: np.ndarray, h: float,
+             share: float = GROUND_SHARE) -> tuple[np.ndarray, Ground | None]:
+    """(N,) bool ground points of ``pts`` (N, 3) and the ``Ground`` through the column samples ``low``
+    (M, 3), or no points and None (``find_ground``; ``h``: the height the scales come from; ``share``:
+    ``_cut``'s).
+
+    The ground is ``ground_plane``, or ``ground_curve`` when that fits ``GROUND_GAIN`` more of the
+    column minima or the plane is refused: accepted (``_cut``) when at most ``GROUND_BELOW`` of the
+    points lie below it and the points within half of ``band_frac`` of the height of it spread
+    ``GROUND_WIDER`` times wider than the trunk. When neither is, each is tried once more following the
+    dips of its columns (``_dips``: a ditch), if then at most ``GROUND_BELOW`` of the points lie
+    ``GROUND_DIP`` of the height or more below it.
+    """
+    none = np.zeros(len(pts), bool), None
+    tol = band_frac * h / 2
+    coef = ground_plane(low, tol)
+    if coef is None:
+        return none
+    first, second = Ground(coef), None
+    gain = GROUND_GAIN * len(low)
+    if _fits(low, first, tol) + gain < len(low):  # room for a curve to fit more
+        second = ground_curve(low, coef, tol, h)
+        if second is not None and _fits(low, second, tol) > _fits(low, first, tol) + gain:
+            first, second = second, first
+    cut = _cut(pts, first.height(pts[:, :2]), band_frac, inside, share)
+    if cut is not None:
+        return cut, first
+    second = ground_curve(low, coef, tol, h) if second is None else second
+    cut = None if second is None else _cut(pts, second.height(pts[:, :2]), band_frac, inside, share)
+    if cut is not None:
+        return cut, second
+    for ground in (first, second):
+        if ground is None:
+            continue
+        under = ground.height(pts[:, :2])
+        if (pts[:, 2] - under < -GROUND_DITCH * h).sum() > GROUND_BELOW * len(pts):
+            continue  # deeper than any dip is followed: they would stay below it (quick)
+        under = under + _dips(pts, under, GROUND_CELL * h, GROUND_DIP * h)
+        if (pts[:, 2] - under < -GROUND_DIP * h).sum() <= GROUND_BELOW * len(pts):
+            cut = _cut(pts, under, band_frac, inside, share)
+            if cut is not None:
+                return cut, ground
+    return none
+
+
+def _fits(low: np.ndarray, ground: Ground, tol: float) -> int:
+    """How many of the column minima ``low`` (M, 3) lie within ``tol`` of ``ground``."""
+    return int((np.abs(low[:, 2] - ground.height(low[:, :2])) < tol).sum())
+
+
+def _dips(pts: np.ndarray, under: np.ndarray, cell: float, deep: float) -> np.ndarray:
+    """(N,) how far the lowest point of each point's ``cell``-wide column of ``pts`` (N, 3) lies below
+    the ground heights ``under`` (N,), where that is less than ``deep`` or the column is linked to such
+    a one (``_linked``: a ditch or a hollow, the ground follows it), else 0 (a trunk under a crown's
+    underside lies deeper)."""
+    rel = pts[:, 2] - under
+    order, first = _columns_low_first(pts[:, :2], rel, cell)
+    low = rel[order[first]]
+    follow = (low < 0) & (low > -deep)
+    follow |= (low < 0) & _linked(pts[order[first], :2], low, cell, deep)
+    dip = np.zeros(len(pts))
+    dip[order] = np.where(follow, low, 0.0)[np.cumsum(first) - 1]
+    return dip
+
+
+def _linked(xy: np.ndarray, low: np.ndarray, cell: float, deep: float) -> np.ndarray:
+    """(M,) bool: the columns (their points ``xy`` (M, 2) and lowest heights ``low`` (M,) over the ground,
+    ``cell`` wide) at most ``GROUND_DITCH`` / ``GROUND_DIP`` times ``deep`` below the ground that a chain
+    of neighbouring columns, each at most ``GROUND_WALL`` times ``cell`` deeper than the last, links to a
+    column less than ``deep`` below it or above it: the walls of a ditch, not a trunk standing under a
+    crown's underside (whose top is no ground to start from)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    cell = max(cell, float(np.ptp(xy, axis=0).max()) / 2 ** 20, 1e-300)
+    ij = np.floor((xy - xy.min(axis=0)) / cell).astype(np.int64)
+    wide = int(ij[:, 1].max()) + 3
+    key = ij[:, 0] * wide + ij[:, 1] + 1
+    order = np.argsort(key)
+    near = low > -GROUND_DITCH / GROUND_DIP * deep
+    pairs = []
+    for step in (wide, 1, wide + 1, wide - 1):  # the neighbours right, up and on both diagonals
+        at = np.minimum(np.searchsorted(key[order], key + step), len(key) - 1)
+        other = order[at]
+        ok = (key[other] == key + step) & near & near[other]
+        ok &= np.abs(low - low[other]) <= GROUND_WALL * cell * (np.sqrt(2) if step in (wide + 1, wide - 1) else 1)
+        pairs.append(np.c_[np.flatnonzero(ok), other[ok]])
+    pairs = np.concatenate(pairs)
+    m = len(low)
+    _, lab = connected_components(coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(m, m)),
+                                  directed=False)
+    start = np.zeros(lab.max() + 1, bool)
+    start[lab[near & (low > -deep)]] = True
+    return near & start[lab]
+
+
+def _cut(pts: np.ndarray, under: np.ndarray, band_frac: float, inside: np.ndarray,
+         share: float = GROUND_SHARE) -> np.ndarray | None:
+    """(N,) bool: the points of ``pts`` (N, 3) cut as ground over the ground heights ``under`` (N,), or
+    None when it is no ground (``find_ground``; ``inside``: the points that set the height).
+
+    The trunk's spread is the narrowest of the slices ``band_frac`` / 3 thick from ``band_frac`` to
+    6 ``band_frac`` above the ground (low branches widen some), or to 10 ``band_frac`` when the ground is
+    not wider than that (grass as tall as 6 ``band_frac``). Cut: everything below the first slice
+    from ``band_frac`` up that is trunk-wide again (at most twice the trunk's spread), grass, shrubs, a
+    rough surface and points under the ground with it, but for the trunk above ``band_frac``: the points
+    within twice that slice's spread of the median of the trunk's narrowest slice (understory shrubs cut
+    the trunk with them, and the root went 5.5-6 % of the height up it; round the median of the slice
+    at the cut, which held the top of a boulder by the trunk, the boulder was kept too and drew the root
+    up to 7.6 % of the height aside). No ground holds fewer than ``share`` of the points within
+    ``band_frac`` / 2 of it.
+    """
+    up = pts[:, 2] - under  # height above the ground
+    step = band_frac * float(up[inside].max()) / 3  # of the tree's height: a slope's rise is not the tree's
+    near = np.flatnonzero((up > -step) & (up < 30 * step))
+    slab = np.floor(up[near] / step).astype(np.int64)
+
+    def spread(k: int) -> float:
+        return _spread(pts[near[slab == k]])
+
+    slices = {k: spread(k) for k in range(3, 18)}
+    band = np.abs(up) < 1.5 * step
+    wide = _spread(pts[band])
+    if wide < GROUND_WIDER * min(slices.values()):  # grass up to 9 % of the height: the trunk shows above it
+        slices.update({k: spread(k) for k in range(18, 30)})
+    trunk = min(slices.values())
+    if (up < -1.5 * step).sum() > GROUND_BELOW * len(pts) or not np.isfinite(trunk) or wide < GROUND_WIDER * trunk:
+        return None
+    if band.sum() < share * len(pts):
+        return None
+    cut = next((k for k in range(3, 30) if slices.get(k, spread(k)) < 2 * trunk), 3)
+    ground = up < cut * step
+    if cut >= 6:  # shrubs or grass round the trunk, twice the band tall: the trunk in them is kept
+        ring = pts[near[slab == min(slices, key=slices.get)]]  # the trunk alone: no boulder's top in it
+        centre, reach = np.median(ring[:, :2], axis=0), 2 * spread(cut)
+        ground &= ~((up >= 3 * step) & (((pts[:, :2] - centre) ** 2).sum(axis=1) < reach ** 2))
+    return ground
