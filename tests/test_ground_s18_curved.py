@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from arboretum_server.decompose.ground import body_span, find_ground
 from arboretum_server.decompose.options import DecomposeOptions
 from arboretum_server.decompose.pipeline import decompose
-from arboretum_server.decompose.ground import body_span, find_ground
 from factories import ground_disc
 
 N_GROUND = 8000

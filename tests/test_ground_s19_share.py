@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from arboretum_server.decompose.ground import find_ground
 from arboretum_server.decompose.options import DecomposeOptions
 from arboretum_server.decompose.pipeline import decompose
-from arboretum_server.decompose.ground import find_ground
 from arboretum_server.decompose.toytree import toy_scan, toy_truth
 
 SCAN_07 = (Path(__file__).resolve().parents[1] / "assets" / "scans" / "07_itsme_buttressed_tree_1"

@@ -9,9 +9,9 @@ import pytest
 
 from arboretum_library.assets import sample_scans
 from arboretum_library.errors import InputError
+from arboretum_server.decompose.ground import find_ground
 from arboretum_server.decompose.options import DecomposeOptions
 from arboretum_server.decompose.pipeline import decompose
-from arboretum_server.decompose.ground import find_ground
 from factories import ground_disc
 
 N_GROUND = 20000
