@@ -272,17 +272,21 @@ def _probe(address: str) -> None:
         host, port = url.hostname, url.port
     except ValueError:
         return
-    if not host or not port:
+    if not host:
         return
     try:
-        with socket.create_connection((host, port), timeout=PROBE_SECONDS) as sock:
+        sock = socket.create_connection((host, port or 8786), timeout=PROBE_SECONDS)  # Dask's default port
+    except OSError:  # refused, unreachable, or no answer to the connection itself: Dask says which
+        return
+    with sock:
+        try:
             sock.settimeout(PROBE_SECONDS)
             sock.recv(1)
-    except TimeoutError:
-        raise InputError(f"--scheduler {address}: nothing answered within {PROBE_SECONDS:g} s; a Dask scheduler "
-                         "speaks as soon as it accepts a connection") from None
-    except OSError:
-        return
+        except TimeoutError:
+            raise InputError(f"--scheduler {address}: nothing answered within {PROBE_SECONDS:g} s; a Dask "
+                             "scheduler speaks as soon as it accepts a connection") from None
+        except OSError:
+            return
 
 
 class _Cluster:
