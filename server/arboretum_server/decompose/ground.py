@@ -79,13 +79,6 @@ def body_span(z: np.ndarray) -> tuple[float, float]:
     return float(max(lo, p_hi - reach)), float(min(hi, p_lo + reach))
 
 
-def lowest_per_cell(pts: np.ndarray, cell: float) -> np.ndarray:
-    """The lowest point (M, 3) of ``pts`` (N, 3) in each ``cell`` x ``cell`` column of the xy plane
-    (columns widened so that no axis holds more than 2 ** 20 of them)."""
-    order, first = _columns_low_first(pts[:, :2], pts[:, 2], cell)
-    return pts[order[first]]
-
-
 def _columns_low_first(xy: np.ndarray, z: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
     """(order, first): the points ``xy`` (N, 2) sorted by ``cell``-wide column and then by ``z`` (N,), and
     (N,) bool marking each column's first, lowest one. Columns are widened so that no axis holds more
@@ -188,7 +181,7 @@ def find_ground(pts: np.ndarray, band_frac: float) -> tuple[np.ndarray, Ground |
     there is no ground.
 
     Scales come from the points between ``body_span``'s (far strays aside) and the ground is sampled by
-    the lowest point of each ``GROUND_CELL`` column of them (``lowest_per_cell``; ``_surface`` fits and
+    the lowest point of each ``GROUND_CELL`` column of them (``_columns_low_first``; ``_surface`` fits and
     checks it). When that finds none and those points reach a column width or more lower than the ones
     with ``GROUND_HELD`` others of their column just above them (``held``), the columns are sampled once
     more by their lowest held point, with the scales taken from the held points: outliers strewn under a
@@ -369,7 +362,7 @@ def _cut(pts: np.ndarray, under: np.ndarray, band_frac: float, inside: np.ndarra
         return None
     if band.sum() < share * len(pts):
         return None
-    cut = next((k for k in range(3, 30) if slices.get(k, spread(k)) < 2 * trunk), 3)
+    cut = next((k for k in range(3, 30) if (slices[k] if k in slices else spread(k)) < 2 * trunk), 3)
     ground = up < cut * step
     if cut >= 6:  # shrubs or grass round the trunk, twice the band tall: the trunk in them is kept
         ring = pts[near[slab == min(slices, key=slices.get)]]  # the trunk alone: no boulder's top in it
