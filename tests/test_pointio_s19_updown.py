@@ -1,8 +1,9 @@
 """``--up auto`` on files standing upside down (session 19). An upside-down file (Z down or Y down) was
 read with its crown at the foot and decomposed with its root at the crown top (root error 102 % of the
-height, exit 0; helper-131's hunt). The guess now finds the way up along each axis first: ground under
-the rest, else a trunk at the top end over a wide foot, and the file is turned the right way up
-('z-down' / 'y-down'). Upright files must not flip: cones, rows, weeping crowns, shrubs, slopes."""
+height, exit 0; helper-131's hunt). The guess now finds the way up along each axis first: ground at the
+top end with a trunk on it, or reaching well beyond the plant, turns the file the right way up
+('z-down' / 'y-down'); a trunk-like top without ground only raises a doubt (``trunk_on_top``, a note).
+Upright files must not flip: cones, rows, weeping crowns, shrubs, slopes."""
 
 from __future__ import annotations
 

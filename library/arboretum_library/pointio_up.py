@@ -33,7 +33,8 @@ class UpGuess:
 def guess_up(points: np.ndarray) -> UpGuess:
     """Guess the way up of a tree: +Z, +Y, or either upside down (``UP_DIRECTIONS``).
 
-    For each axis the way up is found first (``_upside_down``: ground at the top end with a trunk on it),
+    For each axis the way up is found first (``_upside_down``: ground at the top end with a trunk on it,
+    or reaching well beyond the plant),
     then the axis is scored that way up with ``_upright_score``: log(elongation) - 0.75 log(trunk /
     width), where elongation is the robust extent along the axis (0.5-99.5 percentile) over the crown
     width across it (2 x the 95th percentile distance from the median), and trunk is the same width
@@ -44,14 +45,21 @@ def guess_up(points: np.ndarray) -> UpGuess:
     4 log(ratio / SLAB_RATIO). Trees are taller than wide, narrow at the foot and round in plan. X is
     never a candidate; a tie goes to Z. See docs/scan-input.md for limits.
     """
-    pts = np.asarray(points, dtype=np.float64)
-    pts = pts[distinct_rows(pts)[0]]  # a pile of copies (no-return rows at one spot) is one point
-    if len(pts) > 50_000:
-        pts = pts[np.random.default_rng(0).choice(len(pts), 50_000, replace=False)]
+    pts = _sample(points)
     z_way, s_z = _way_up(pts, 2)
     y_way, s_y = _way_up(pts, 1)
     confidence = float(1.0 / (1.0 + np.exp(-2.0 * min(abs(s_z - s_y), 20.0))))
     return UpGuess(y_way if s_y > s_z else z_way, confidence, z_way)
+
+
+def _sample(points: np.ndarray) -> np.ndarray:
+    """``points`` as float64 without repeats (a pile of copies, no-return rows at one spot, is one point)
+    and at most a fixed random 50,000 of them: what the way-up tests look at."""
+    pts = np.asarray(points, dtype=np.float64)
+    pts = pts[distinct_rows(pts)[0]]
+    if len(pts) > 50_000:
+        pts = pts[np.random.default_rng(0).choice(len(pts), 50_000, replace=False)]
+    return pts
 
 
 def guess_up_axis(points: np.ndarray) -> tuple[str, float]:
@@ -173,9 +181,7 @@ def trunk_on_top(points: np.ndarray) -> bool:
     no ground under it, and its top end is a trunk (``_trunk``: even, narrow slices) over a lowest end
     more than ``FOOT_RATIO`` times wider. Also true of a conifer with a bare leader, a dead top or a pole
     taller than the tree, so it only asks for a note, never a turn."""
-    pts = np.asarray(points, dtype=np.float64)
-    if len(pts) > 50_000:
-        pts = pts[np.random.default_rng(0).choice(len(pts), 50_000, replace=False)]
+    pts = _sample(points)
     if len(pts) < 20 or _ground(pts, 2) is not None:
         return False
     flipped = pts * np.array([1.0, 1.0, -1.0])
@@ -224,7 +230,8 @@ TRUNK_NARROW, TRUNK_EVEN = 0.15, 2.5
 """A trunk (``_trunk``): foot slices under this fraction of the height, the widest at most this many
 times the narrowest."""
 FOOT_RATIO = 3.0
-"""Upside down: the lowest end's narrowest foot slice more than this many times the top's widest."""
+"""``trunk_on_top`` (a note, never a turn): the lowest end's narrowest foot slice more than this many times
+the top's widest."""
 
 
 def _footprint(across: np.ndarray, height: float, eps: float) -> float:
