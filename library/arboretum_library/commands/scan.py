@@ -96,7 +96,7 @@ def format_stats(s: dict) -> str:
         f"  points     {s['points']:,}",
         f"  extent     {extent}",
         f"  height     {s['height']:.3f} m",
-        f"  up axis    {s['up_axis']}{_UPSIDE_DOWN if s['up_axis'].endswith('-down') else ''} "
+        f"  up axis    {_way_up(s['up_axis'])} "
         f"(guess {s['up_guess']}, confidence {s['up_confidence']:.2f})",
         f"  spacing    {s['spacing'] * 1000:.1f} mm (median nearest-neighbour distance)",
         f"  attributes {', '.join(attrs) if attrs else 'none'}",
@@ -106,8 +106,9 @@ def format_stats(s: dict) -> str:
     return "\n".join(lines)
 
 
-_UPSIDE_DOWN = ": the file stands upside down; turned the right way up"
-"""What ``scan info`` adds to a way up of 'z-down' or 'y-down'."""
+def _way_up(up_axis: str) -> str:
+    """The way up a file was read with, as ``scan info`` and ``scan convert`` print it."""
+    return up_axis + (": the file stands upside down; turned the right way up" if up_axis.endswith("-down") else "")
 
 MIN_HEIGHT, MAX_HEIGHT = 1e-3, 1e3
 """Range of ``scan convert --height`` in metres: a millimetre to a kilometre covers every tree (and
@@ -153,6 +154,6 @@ def run_convert(args: argparse.Namespace) -> int:
     stats = scan_stats(cloud)
     stats["file"] = str(out)
     stats["input"] = args.input
-    text = f"wrote {out}: {len(cloud):,} points, height {stats['height']:.3f} m (from {args.input}, up {cloud.up_axis}{_UPSIDE_DOWN if cloud.up_axis.endswith('-down') else ''})"
+    text = f"wrote {out}: {len(cloud):,} points, height {stats['height']:.3f} m (from {args.input}, up {_way_up(cloud.up_axis)})"
     emit(args, stats, text)
     return 0

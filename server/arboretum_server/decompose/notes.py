@@ -63,13 +63,18 @@ def refusal(message: str, coarse: str | None, error: Exception | None = None, do
 _OTHER_WAY = {"z": "z-down", "y": "y-down", "z-down": "z", "y-down": "y"}
 
 
+def _pass_up(way: str, build: bool) -> str:
+    """How the user reads a file with ``--up way``: ``library build`` has no ``--up``."""
+    return f"decompose it alone with --up {way}" if build else f"pass --up {way}"
+
+
 def upside_down_note(up_asked: str, up_read: str, build: bool = False) -> str | None:
     """The note for a file ``--up auto`` found standing upside down (``up_read`` 'z-down' or 'y-down',
     ``pointio_up.guess_up``: ground at its top with a trunk on it) and turned the right way up, else
     None. ``build``: for ``library build``, which has no ``--up``."""
     if up_asked != "auto" or not up_read.endswith("-down"):
         return None
-    how = f"decompose it alone with --up {up_read[0]}" if build else f"pass --up {up_read[0]}"
+    how = _pass_up(up_read[0], build)
     return (f"--up auto found the file upside down (its ground at the top) and turned it the right way up "
             f"(--up {up_read}); to read it as written, {how}")
 
@@ -83,7 +88,7 @@ def upside_down_doubt(points_zup, up_read: str, build: bool = False) -> str | No
     if not trunk_on_top(points_zup):
         return None
     other = _OTHER_WAY[up_read]
-    how = f"decompose it alone with --up {other}" if build else f"pass --up {other}"
+    how = _pass_up(other, build)
     return (f"the tree may stand upside down as read (--up {up_read}): its top is trunk-like over a much "
             f"wider foot and no ground tells which way is up; if the file is upside down, {how}")
 
