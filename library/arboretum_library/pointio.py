@@ -95,6 +95,9 @@ class PointCloud:
     stored_as: str = ""
     """How the file stored the coordinates: 'float32', 'float64', 'text', 'LAS integers scaled by
     0.001'..., or '' when built in memory."""
+    up_guess: UpGuess | None = None
+    """``guess_up`` of the points in the file's own frame, when ``read_points`` made it (``up='auto'``
+    on any format but LAS/LAZ), else None."""
 
     def __post_init__(self) -> None:
         pts = frozen_array(self, "points", self.points, np.float64, (None, 3))
@@ -161,6 +164,11 @@ AUTO_Y_CONFIDENCE = 0.75
 """With ``up='auto'`` a file is turned from Y up only when ``guess_up_axis`` says 'y' this surely."""
 
 
+Z_UP_SUFFIXES = (".las", ".laz")
+"""Formats whose Z is up by definition (ASPRS LAS: Z is elevation): ``up='auto'`` reads them Z up without
+a guess. A wall, a fence or returns under the ground could turn a guess; they cannot turn a LAS file."""
+
+
 def auto_up(guess: UpGuess) -> str:
     """The way up ``up='auto'`` reads a file with: the guess on Y only at ``AUTO_Y_CONFIDENCE``, else
     Z, upside down or not as the guess found it along Z."""
@@ -182,9 +190,12 @@ def read_points(path: str | Path, options: ReadOptions = ReadOptions()) -> Point
     path = Path(path)
     raw = _read_raw(path)
     points = _checked_points(path, raw)
-    up = options.up
-    if up == "auto":
-        up = auto_up(guess_up(points))
+    up, guess = options.up, None
+    if up == "auto" and path.suffix.lower() in Z_UP_SUFFIXES:
+        up = "z"
+    elif up == "auto":
+        guess = guess_up(points)
+        up = auto_up(guess)
     points = turn_to_zup(points, up)
     keep = None
     if options.max_points is not None and len(points) > options.max_points:
@@ -201,6 +212,7 @@ def read_points(path: str | Path, options: ReadOptions = ReadOptions()) -> Point
             up_axis=up,
             resolution=float(raw.get("resolution", 0.0)) * scale,
             stored_as=str(raw.get("stored_as", "")),
+            up_guess=guess,
         )
     except ValidationError as exc:
         raise InputError(f"'{path}': {exc}") from None

@@ -86,7 +86,7 @@ def scan_stats(cloud: PointCloud, seed: int = 0) -> dict[str, Any]:
     """
     pts = cloud.points
     lo, hi = column_bounds(pts)
-    guess = guess_up(turn_from_zup(pts, cloud.up_axis))
+    guess = cloud.up_guess or guess_up(turn_from_zup(pts, cloud.up_axis))
     stats: dict[str, Any] = {
         "file": cloud.source,
         "points": len(pts),

@@ -97,13 +97,24 @@ def format_stats(s: dict) -> str:
         f"  extent     {extent}",
         f"  height     {s['height']:.3f} m",
         f"  up axis    {_way_up(s['up_axis'])} "
-        f"(guess {s['up_guess']}, confidence {s['up_confidence']:.2f})",
+        f"(guess {s['up_guess']}, confidence {s['up_confidence']:.2f}){_las_doubt(s)}",
         f"  spacing    {s['spacing'] * 1000:.1f} mm (median nearest-neighbour distance)",
         f"  attributes {', '.join(attrs) if attrs else 'none'}",
     ]
     if "leaf_fraction" in s:
         lines.append(f"  leaf       {s['leaf_fraction'] * 100:.1f}% of points")
     return "\n".join(lines)
+
+
+def _las_doubt(s: dict) -> str:
+    """For a LAS/LAZ file read Z up (its format's way, see ``pointio.Z_UP_SUFFIXES``) whose shape
+    suggests otherwise: the option that reads it as the guess says, else ''."""
+    from arboretum_library.pointio import AUTO_Y_CONFIDENCE, Z_UP_SUFFIXES
+
+    guess, sure = s["up_guess"], s["up_confidence"] >= AUTO_Y_CONFIDENCE or s["up_guess"] == "z-down"
+    if not s["file"].lower().endswith(Z_UP_SUFFIXES) or s["up_axis"] != "z" or guess == "z" or not sure:
+        return ""
+    return f"; LAS is Z up by its format, so the guess was not applied: pass --up {guess} if the file is not"
 
 
 def _way_up(up_axis: str) -> str:

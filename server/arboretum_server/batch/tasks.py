@@ -156,8 +156,8 @@ def _decompose(path: str, sha256: str, options: dict[str, Any], t0: float) -> Sc
         bare_note,
         refusal,
         result_notes,
+        up_doubts,
         up_guess_flat,
-        upside_down_doubt,
         upside_down_note,
     )
     from arboretum_server.decompose.options import DecomposeOptions
@@ -172,7 +172,7 @@ def _decompose(path: str, sha256: str, options: dict[str, Any], t0: float) -> Sc
     # the file's own precision, kept with the notes; by file name: the build's line names the path, and a
     # refusal is cut at 500 characters
     coarse = precision_note(replace(cloud, source=os.path.basename(path)), points=opts.points)
-    doubt = upside_down_doubt(cloud.points, cloud.up_axis, build=True)  # a trunk-like top and no ground
+    doubt = up_doubts(cloud, "auto", build=True)  # a trunk-like top and no ground; a LAS shaped Y up
     try:
         dec = decompose(cloud.points, opts, labels=cloud.labels)
     except InputError as exc:  # on a coarse grid the refusal names the symptom: say the cause too

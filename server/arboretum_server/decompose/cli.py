@@ -134,7 +134,7 @@ def _run(args: argparse.Namespace) -> int:
     from arboretum_library.progress import StatusLine
 
     from .examples import UP_AXIS_KEY, file_sha256, provenance
-    from .notes import bare_note, notes, upside_down_doubt, upside_down_note
+    from .notes import bare_note, notes, up_doubts, upside_down_note
 
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     options = _options(args)
@@ -157,7 +157,7 @@ def _run(args: argparse.Namespace) -> int:
                 emit(args, data, _text(data))
                 return 0
             coarse = precision_note(cloud, points=options.points)  # float32 at UTM: the points sit on a 0.5 m grid
-            doubt = upside_down_doubt(cloud.points, cloud.up_axis)  # a trunk-like top and no ground
+            doubt = up_doubts(cloud, args.up)  # a trunk-like top and no ground; a LAS shaped Y up
             dec = _decompose(args.scan, cloud, options, status, coarse, doubt)
             if args.save_hbl:
                 _save_hbl(args.save_hbl, dec.hbl)

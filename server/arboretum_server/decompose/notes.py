@@ -93,6 +93,28 @@ def upside_down_doubt(points_zup, up_read: str, build: bool = False) -> str | No
             f"wider foot and no ground tells which way is up; if the file is upside down, {how}")
 
 
+def las_doubt(cloud, up_asked: str, build: bool = False) -> str | None:
+    """A note when ``--up auto`` read a LAS/LAZ file Z up, as its format defines (``pointio.Z_UP_SUFFIXES``,
+    no guess), but its shape says Y up as surely as a guess must be to turn other files
+    (``pointio.AUTO_Y_CONFIDENCE``); else None. ``cloud`` as ``read_points`` gave it."""
+    from arboretum_library.pointio import AUTO_Y_CONFIDENCE, Z_UP_SUFFIXES
+    from arboretum_library.pointio_up import guess_up
+
+    if up_asked != "auto" or cloud.up_axis != "z" or not cloud.source.lower().endswith(Z_UP_SUFFIXES):
+        return None
+    guess = guess_up(cloud.points)
+    if not guess.direction.startswith("y") or guess.confidence < AUTO_Y_CONFIDENCE:
+        return None
+    return (f"the LAS file is read Z up, as its format defines, but its shape looks {guess.direction} up "
+            f"(confidence {guess.confidence:.2f}): if it is, {_pass_up(guess.direction, build)}")
+
+
+def up_doubts(cloud, up_asked: str, build: bool = False) -> str | None:
+    """``las_doubt`` and ``upside_down_doubt`` of ``cloud`` as one note, or None."""
+    said = [las_doubt(cloud, up_asked, build), upside_down_doubt(cloud.points, cloud.up_axis, build)]
+    return "; ".join(n for n in said if n) or None
+
+
 def up_guess_flat(points_zup, up_asked: str, up_read: str) -> str | None:
     """Why a cloud read with ``--up auto`` lies at one height when the guess turned it (``up_read``
     'y'), yet the file as written does not (its Z spreads): a vertical wall in a Z-up file reads as Y up
