@@ -6,6 +6,7 @@ which calls it; docs/decomposition.md, "Ground", has the rules and what was meas
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,8 +36,10 @@ GROUND_SPAN = 1.1
 GROUND_DIP = 0.03
 """When neither surface is accepted, each column of the ground follows its lowest point down to this
 fraction of the height below it (a ditch 1 % deep held more than ``GROUND_BELOW`` of the points)."""
-GROUND_HELD = 2
-"""``held``: a column's ground sample has this many points of its column just above it."""
+GROUND_HELD = 3
+"""``held``: a column's ground sample has this many points of its column just above it (2 let 5 %
+uniform outliers hold some of scan 10's columns 2-12 % of the height under its ground, which was then
+missed in 8 of 10 draws)."""
 GROUND_DITCH = 0.1
 """``_dips`` follows a column deeper than ``GROUND_DIP`` down to this fraction of the height below the
 ground when a chain of columns, each at most ``GROUND_WALL`` deeper than the last, leads to it from a
@@ -124,6 +127,10 @@ class Ground:
         return z + d[:, 0] ** 2 * self.bend[0] + d[:, 0] * d[:, 1] * self.bend[1] + d[:, 1] ** 2 * self.bend[2]
 
 
+Found = tuple[np.ndarray, "Ground | None"]
+"""``find_ground``'s answer: (N,) bool ground points and the ``Ground``, or no points and None."""
+
+
 def ground_plane(low: np.ndarray, tol: float) -> np.ndarray | None:
     """(a, b, c) of the ground z = a x + b y + c through the column minima ``low`` (M, 3), or None.
 
@@ -187,7 +194,8 @@ def find_ground(pts: np.ndarray, band_frac: float) -> tuple[np.ndarray, Ground |
     more by their lowest held point, with the scales taken from the held points: outliers strewn under a
     small ground were the minima of most columns and stretched the span (scan 10, its ground 2.5 m wide,
     with 1-3 % uniform outliers: its ground was kept, the root 4 m under it). When that finds none either,
-    a surface holding fewer than ``GROUND_SHARE`` of the points is taken after all: the floor of
+    the first search's surface holding fewer than ``GROUND_SHARE`` of the points (``_surface`` keeps
+    it; it is not searched for again) is taken after all: the floor of
     outliers strewn under a tree with no ground, cut with the strays below the tree (scan 07 with
     1.5-3 % of them: the root 20-23 % of the height too low in 8 of 12 draws without it).
     """
@@ -199,12 +207,11 @@ def find_ground(pts: np.ndarray, band_frac: float) -> tuple[np.ndarray, Ground |
     inside = (pts[:, 2] >= lo) & (pts[:, 2] <= hi)
     body = pts if inside.all() else pts[inside]
     order, first = _columns_low_first(body[:, :2], body[:, 2], GROUND_CELL * h)
-    low = body[order[first]]
-    found = _surface(pts, low, band_frac, inside, h)
+    found, sparse = _surface(pts, body[order[first]], band_frac, inside, h)
     if found[1] is None:
         found = _held_surface(pts, body, order, first, band_frac, lo, hi)
-    if found[1] is None:  # no ground but maybe the sparse floor of strays under the tree
-        found = _surface(pts, low, band_frac, inside, h, share=0.0)
+    if found[1] is None and sparse is not None:  # no ground but maybe the sparse floor of strays under the tree
+        found = sparse
     return found
 
 
@@ -228,15 +235,16 @@ def _held_surface(pts: np.ndarray, body: np.ndarray, order: np.ndarray, first: n
     order, first = held(body[:, 2], order, first, band_frac * h / 2)
     if first.sum() < 20:
         return none
-    found = _surface(pts, body[order[first]], band_frac, inside, h)
+    found, _ = _surface(pts, body[order[first]], band_frac, inside, h)
     return found if found[1] is not None else none
 
 
-def _surface(pts: np.ndarray, low: np.ndarray, band_frac: float, inside: np.ndarray, h: float,
-             share: float = GROUND_SHARE) -> tuple[np.ndarray, Ground | None]:
+def _surface(pts: np.ndarray, low: np.ndarray, band_frac: float, inside: np.ndarray,
+             h: float) -> tuple[Found, Found | None]:
     """(N,) bool ground points of ``pts`` (N, 3) and the ``Ground`` through the column samples ``low``
-    (M, 3), or no points and None (``find_ground``; ``h``: the height the scales come from; ``share``:
-    ``_cut``'s).
+    (M, 3), or no points and None (``find_ground``; ``h``: the height the scales come from); and the
+    first surface refused only for holding under ``GROUND_SHARE`` of the points, or None
+    (``find_ground``'s last resort: found here once, not searched for again).
 
     The ground is ``ground_plane``, or ``ground_curve`` when that fits ``GROUND_GAIN`` more of the
     column minima or the plane is refused: accepted (``_cut``) when at most ``GROUND_BELOW`` of the
@@ -245,24 +253,35 @@ def _surface(pts: np.ndarray, low: np.ndarray, band_frac: float, inside: np.ndar
     dips of its columns (``_dips``: a ditch), if then at most ``GROUND_BELOW`` of the points lie
     ``GROUND_DIP`` of the height or more below it.
     """
-    none = np.zeros(len(pts), bool), None
+    sparse = None
+    for ground, under in _candidates(pts, low, band_frac, h):
+        cut = _cut(pts, under, band_frac, inside)
+        if cut is None:
+            continue
+        if cut[1]:
+            return (cut[0], ground), sparse
+        if sparse is None:
+            sparse = cut[0], ground
+    return (np.zeros(len(pts), bool), None), sparse
+
+
+def _candidates(pts: np.ndarray, low: np.ndarray, band_frac: float, h: float) -> Iterator[tuple[Ground, np.ndarray]]:
+    """``_surface``'s surfaces to try, in order, each with its heights under ``pts`` (N,): the better
+    fitting of plane and curve, the other, then each following the dips of its columns."""
     tol = band_frac * h / 2
     coef = ground_plane(low, tol)
     if coef is None:
-        return none
+        return
     first, second = Ground(coef), None
     gain = GROUND_GAIN * len(low)
     if _fits(low, first, tol) + gain < len(low):  # room for a curve to fit more
         second = ground_curve(low, coef, tol, h)
         if second is not None and _fits(low, second, tol) > _fits(low, first, tol) + gain:
             first, second = second, first
-    cut = _cut(pts, first.height(pts[:, :2]), band_frac, inside, share)
-    if cut is not None:
-        return cut, first
+    yield first, first.height(pts[:, :2])
     second = ground_curve(low, coef, tol, h) if second is None else second
-    cut = None if second is None else _cut(pts, second.height(pts[:, :2]), band_frac, inside, share)
-    if cut is not None:
-        return cut, second
+    if second is not None:
+        yield second, second.height(pts[:, :2])
     for ground in (first, second):
         if ground is None:
             continue
@@ -271,10 +290,7 @@ def _surface(pts: np.ndarray, low: np.ndarray, band_frac: float, inside: np.ndar
             continue  # deeper than any dip is followed: they would stay below it (quick)
         under = under + _dips(pts, under, GROUND_CELL * h, GROUND_DIP * h)
         if (pts[:, 2] - under < -GROUND_DIP * h).sum() <= GROUND_BELOW * len(pts):
-            cut = _cut(pts, under, band_frac, inside, share)
-            if cut is not None:
-                return cut, ground
-    return none
+            yield ground, under
 
 
 def _fits(low: np.ndarray, ground: Ground, tol: float) -> int:
@@ -328,10 +344,11 @@ def _linked(xy: np.ndarray, low: np.ndarray, cell: float, deep: float) -> np.nda
     return near & start[lab]
 
 
-def _cut(pts: np.ndarray, under: np.ndarray, band_frac: float, inside: np.ndarray,
-         share: float = GROUND_SHARE) -> np.ndarray | None:
-    """(N,) bool: the points of ``pts`` (N, 3) cut as ground over the ground heights ``under`` (N,), or
-    None when it is no ground (``find_ground``; ``inside``: the points that set the height).
+def _cut(pts: np.ndarray, under: np.ndarray, band_frac: float,
+         inside: np.ndarray) -> tuple[np.ndarray, bool] | None:
+    """(N,) bool: the points of ``pts`` (N, 3) cut as ground over the ground heights ``under`` (N,), and
+    whether it holds ``GROUND_SHARE`` of the points within ``band_frac`` / 2 of it; None when it is no
+    ground (``find_ground``; ``inside``: the points that set the height).
 
     The trunk's spread is the narrowest of the slices ``band_frac`` / 3 thick from ``band_frac`` to
     6 ``band_frac`` above the ground (low branches widen some), or to 10 ``band_frac`` when the ground is
@@ -341,8 +358,7 @@ def _cut(pts: np.ndarray, under: np.ndarray, band_frac: float, inside: np.ndarra
     within twice that slice's spread of the median of the trunk's narrowest slice (understory shrubs cut
     the trunk with them, and the root went 5.5-6 % of the height up it; round the median of the slice
     at the cut, which held the top of a boulder by the trunk, the boulder was kept too and drew the root
-    up to 7.6 % of the height aside). No ground holds fewer than ``share`` of the points within
-    ``band_frac`` / 2 of it.
+    up to 7.6 % of the height aside).
     """
     up = pts[:, 2] - under  # height above the ground
     step = band_frac * float(up[inside].max()) / 3  # of the tree's height: a slope's rise is not the tree's
@@ -360,12 +376,10 @@ def _cut(pts: np.ndarray, under: np.ndarray, band_frac: float, inside: np.ndarra
     trunk = min(slices.values())
     if (up < -1.5 * step).sum() > GROUND_BELOW * len(pts) or not np.isfinite(trunk) or wide < GROUND_WIDER * trunk:
         return None
-    if band.sum() < share * len(pts):
-        return None
     cut = next((k for k in range(3, 30) if (slices[k] if k in slices else spread(k)) < 2 * trunk), 3)
     ground = up < cut * step
     if cut >= 6:  # shrubs or grass round the trunk, twice the band tall: the trunk in them is kept
         ring = pts[near[slab == min(slices, key=slices.get)]]  # the trunk alone: no boulder's top in it
         centre, reach = np.median(ring[:, :2], axis=0), 2 * spread(cut)
         ground &= ~((up >= 3 * step) & (((pts[:, :2] - centre) ** 2).sum(axis=1) < reach ** 2))
-    return ground
+    return ground, bool(band.sum() >= GROUND_SHARE * len(pts))

@@ -30,6 +30,8 @@ cluster's, hangs from the crown (a weeping branch's tips or leaves reaching into
 second tree."""
 LINK = 0.02
 """Points of the base band closer than this fraction of the height belong to one cluster."""
+BASE_NEIGHBOURS = 4
+"""``_dense_start``: a point of a trunk's foot has at least this many others within ``LINK`` of the height."""
 LINK_MAX = 4000
 """A base band of more points is clustered on this many of them (``_link``)."""
 HANGING_SHARE = 0.5
@@ -48,7 +50,9 @@ def find_root(pts: np.ndarray, up: np.ndarray | None = None) -> np.ndarray:
 
     The band is the lowest ``BASE_BAND`` of the height, measured in ``up`` (N,), each point's height
     above the ground, when one was found (a second tree up the slope stands in it too), else from the
-    lowest point.
+    lowest point. When the band holds no big cluster nor any point with ``BASE_NEIGHBOURS`` others
+    within ``LINK`` of the height, it starts at the lowest such point instead (``_dense_start``: lone
+    points under the trunk).
     InputError when the band holds several well-separated trunks (clusters hanging from the crown aside:
     ``STANDING``, ``_no_column``), or when its largest cluster spreads too wide to be one trunk base.
     A second tree standing higher than the band is not refused here: see ``columns.trunk_columns``.
@@ -56,11 +60,9 @@ def find_root(pts: np.ndarray, up: np.ndarray | None = None) -> np.ndarray:
     z = pts[:, 2]
     h = np.ptp(z)
     up = z if up is None else up
-    band = np.flatnonzero(up < up.min() + BASE_BAND * h)
-    if len(band) < BASE_MIN:
-        band = np.argsort(up)[:BASE_MIN]
-    base = pts[band]
-    lab, big = _base_clusters(np.c_[base[:, :2], up[band]], h, np.c_[pts[:, :2], up])
+    base, lab, big = _band(pts, up, h, float(up.min()))
+    if not len(big) and (start := _dense_start(pts, up, h)) > up.min() + BASE_BAND * h:  # lone points under it
+        base, lab, big = _band(pts, up, h, start)
     trunk = base[lab == big[0]] if len(big) else base
     centre = np.median(trunk[:, :2], axis=0)
     r90 = plan_radius(trunk, 90)
@@ -70,6 +72,39 @@ def find_root(pts: np.ndarray, up: np.ndarray | None = None) -> np.ndarray:
             f"{r90:.3g} wide for a height of {h:.3g}); crop the scan to one standing tree"
         )
     return np.array([centre[0], centre[1], trunk[:, 2].min()])
+
+
+def _band(pts: np.ndarray, up: np.ndarray, h: float, start: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(base band of ``pts`` (N, 3), its cluster labels, its big clusters: ``_base_clusters``): the
+    points from ``start`` up ``BASE_BAND`` of the height ``h`` in ``up`` (N,), at least the
+    ``BASE_MIN`` lowest from ``start``."""
+    above = up >= start
+    band = np.flatnonzero(above & (up < start + BASE_BAND * h))
+    if len(band) < BASE_MIN:
+        band = np.flatnonzero(above)[np.argsort(up[above])[:BASE_MIN]]
+    base = pts[band]
+    lab, big = _base_clusters(np.c_[base[:, :2], up[band]], h, np.c_[pts[:, :2], up])
+    return base, lab, big
+
+
+def _dense_start(pts: np.ndarray, up: np.ndarray, h: float) -> float:
+    """The lowest ``up`` (N,) of a point of ``pts`` (N, 3) with ``BASE_NEIGHBOURS`` others within ``LINK``
+    of the height ``h`` (x, y and ``up``): outliers strewn under a tree with no ground stand alone there
+    (scans 01, 06, 07 and the harmonic apple with 0.5-5 % uniform outliers: the root went onto them, up
+    to 25 % of the height low, or the band was refused as too wide), a trunk's foot does not. The lowest
+    point when none has."""
+    from scipy.spatial import cKDTree
+
+    q = np.c_[pts[:, :2], up]
+    tree = cKDTree(q)
+    order = np.argsort(up, kind="stable")
+    for at in range(0, len(order), 256):  # the lowest first: the trunk's foot comes soon
+        some = order[at:at + 256]
+        count = tree.query_ball_point(q[some], LINK * h, return_length=True)
+        dense = np.flatnonzero(count > BASE_NEIGHBOURS)  # itself counted
+        if len(dense):
+            return float(up[some[dense[0]]])
+    return float(up.min())
 
 
 def _base_clusters(base: np.ndarray, h: float, cloud: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
