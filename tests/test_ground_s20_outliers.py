@@ -89,3 +89,16 @@ def test_the_last_resort_reuses_the_first_search(scans, monkeypatch):
     ground, surface = find_ground(np.r_[pts, _strewn(pts, 0.02, 0)], 0.015)
     assert surface is not None and ground[:len(pts)].sum() == 0
     assert len(calls) == 2
+
+
+def test_a_sparse_trunk_is_a_column_not_lone_points():
+    # 600 points of the toy tree: its trunk's foot has no 4 neighbours within 2 % of the height either,
+    # and the band started 20 % of the height up the trunk until the points under it had to stand apart
+    from arboretum_server.decompose.toytree import toy_scan, toy_truth
+
+    pts = toy_scan(toy_truth(), leaf_fraction=0.5, seed=1)[0]
+    sparse = pts[np.random.default_rng(600).choice(len(pts), 600, replace=False)]
+    h = np.ptp(sparse[:, 2])
+    root = find_root(sparse)
+    assert root[2] - sparse[:, 2].min() < 0.02 * h
+    assert np.linalg.norm(root[:2]) < 0.05 * h
