@@ -28,6 +28,8 @@ class UpGuess:
     """In [0.5, 1): how sure the axis (Z or Y) is; a logistic of the score difference."""
     z_direction: str
     """'z' or 'z-down': the way up along Z, for a file kept on Z when the confidence is too low for Y."""
+    z_ground: bool = False
+    """Whether ground lies under the cloud along +Z as given (``ground_band``): ``trunk_on_top`` reuses it."""
 
 
 def guess_up(points: np.ndarray) -> UpGuess:
@@ -42,14 +44,20 @@ def guess_up(points: np.ndarray) -> UpGuess:
     and adds ``GROUND_BONUS``: a scan's ground disc as wide as the tree is tall hid its trunk and turned
     it on its side. An axis whose footprint is a line (its thin side under ``SLAB_RATIO`` of both its
     long side and the extent along the axis: a flat cloud stood on its edge, not a row of trees) loses
-    4 log(ratio / SLAB_RATIO). Trees are taller than wide, narrow at the foot and round in plan. X is
-    never a candidate; a tie goes to Z. See docs/scan-input.md for limits.
+    4 log(ratio / SLAB_RATIO). With no ground at either end of either axis, a wall or a fence beside
+    the tree (``_wall``) is left out of both scores: its length read as a tree's height and turned it on
+    its side. Trees are taller than wide, narrow at the foot and round in plan. X is never a candidate; a
+    tie goes to Z. See docs/scan-input.md for limits.
     """
     pts = _sample(points)
-    z_way, s_z = _way_up(pts, 2)
-    y_way, s_y = _way_up(pts, 1)
+    z_way, s_z, z_ground, z_any = _way_up(pts, 2)
+    y_way, s_y, _, y_any = _way_up(pts, 1)
+    if not (z_any or y_any):  # no ground either way: a wall beside the tree is left out
+        wall = _wall(pts, 2) | _wall(pts, 1)
+        if wall.any():
+            s_z, s_y = _upright_score(pts[~wall], 2, None), _upright_score(pts[~wall], 1, None)
     confidence = float(1.0 / (1.0 + np.exp(-2.0 * min(abs(s_z - s_y), 20.0))))
-    return UpGuess(y_way if s_y > s_z else z_way, confidence, z_way)
+    return UpGuess(y_way if s_y > s_z else z_way, confidence, z_way, z_ground)
 
 
 def _sample(points: np.ndarray) -> np.ndarray:
@@ -99,14 +107,58 @@ def turn_from_zup(points: np.ndarray, direction: str) -> np.ndarray:
     return out
 
 
-def _way_up(pts: np.ndarray, axis: int) -> tuple[str, float]:
-    """The way up along ``axis`` (2: 'z' or 'z-down', 1: 'y' or 'y-down') and its upright score."""
+def _way_up(pts: np.ndarray, axis: int) -> tuple[str, float, bool, bool]:
+    """The way up along ``axis`` (2: 'z' or 'z-down', 1: 'y' or 'y-down'), its upright score, whether
+    ground lies under ``pts`` along +``axis`` as given, and whether ground lies at either end."""
     flipped = pts.copy()
     flipped[:, axis] *= -1.0
     grounds = (_ground(pts, axis), _ground(flipped, axis))
     down = _upside_down(pts, flipped, axis, grounds)
     name = "zy"[2 - axis] + ("-down" if down else "")
-    return name, _upright_score(flipped if down else pts, axis, grounds[down])
+    score = _upright_score(flipped if down else pts, axis, grounds[down])
+    return name, score, grounds[0] is not None, any(g is not None for g in grounds)
+
+
+WALL_BAND, WALL_SHARE, WALL_THIN, WALL_LOW = 0.01, 0.05, 0.6, 0.5
+"""A wall beside a tree with no ground (``_wall``): the points within this fraction of the largest extent
+of a line in the footprint; its thin core (a quarter of that) holds at least this share of the points
+and this share of the band's, 90 % of them in this lowest fraction of the extent along the axis."""
+WALL_TRIES, WALL_SAMPLE = 100, 4000
+"""``_wall`` tries this many lines through two points of a fixed random sample of this many."""
+
+
+def _wall(pts: np.ndarray, axis: int) -> np.ndarray:
+    """(N,) bool: the points of a wall (or a fence) standing along ``axis`` beside the tree, all False when
+    none. On a fixed random ``WALL_SAMPLE`` of the points, the line in the footprint across ``axis``
+    holding the most of the lower half's points within a quarter of ``WALL_BAND`` (``WALL_TRIES`` lines
+    through two of them) is a wall when that thin band holds ``WALL_SHARE`` of the points and
+    ``WALL_THIN`` of those within ``WALL_BAND`` (a wall is thin; a slice of crown is not), and 90 % of
+    them lie in the lowest ``WALL_LOW`` of the extent along ``axis`` (a wall is lower than the tree; a
+    row's trunks are not). Its points there are the wall (a crown may reach over it)."""
+    none = np.zeros(len(pts), dtype=bool)
+    rng = np.random.default_rng(0)
+    sub = pts[rng.integers(0, len(pts), WALL_SAMPLE)]
+    lo, hi = np.percentile(sub[:, axis], [0.5, 99.5])
+    top = lo + WALL_LOW * (hi - lo)
+    low = np.delete(sub[sub[:, axis] < top], axis, axis=1)
+    if len(low) < 20 or not hi > lo:
+        return none
+    a, b = low[rng.integers(0, len(low), WALL_TRIES)], low[rng.integers(0, len(low), WALL_TRIES)]
+    d = b - a
+    norm = np.hypot(d[:, 0], d[:, 1])
+    if not (norm > 0).any():
+        return none
+    n = np.stack([-d[:, 1], d[:, 0]], axis=1)[norm > 0] / norm[norm > 0, None]
+    off = np.einsum("ij,ij->i", n, a[norm > 0])
+    band = WALL_BAND * _largest_extent(pts)
+    best = int(np.argmax((np.abs(low @ n.T - off) < 0.25 * band).sum(axis=0)))
+    dist = np.abs(np.delete(sub, axis, axis=1) @ n[best] - off[best])
+    thin = dist < 0.25 * band
+    if thin.mean() < WALL_SHARE or thin.sum() < WALL_THIN * (dist < band).sum():
+        return none
+    if (sub[thin, axis] < top).mean() < 0.9:
+        return none
+    return (np.abs(np.delete(pts, axis, axis=1) @ n[best] - off[best]) < band) & (pts[:, axis] < top)
 
 
 def _ground(pts: np.ndarray, axis: int) -> np.ndarray | None:
@@ -127,6 +179,10 @@ GROUND_TOL = 0.01
 the median of its 3 x 3 columns' lowest points."""
 GROUND_TILT = 0.5
 """... and the surface there rises at most this much per unit across (27 degrees)."""
+GROUND_PASSES, GROUND_DEEP = 2, 0.03
+"""Multipath (returns under the ground, a few per cent of a TLS scan's): the points more than ``GROUND_TOL``
+under the surface are left out and the surface found again, this many times, when they are at most this
+share of the points (more is a crown's or rough ground's own relief: the first surface is kept)."""
 GROUND_BAND = 0.03
 """Left out as ground: the points less than this fraction of the extent above their column's ground, and
 up to the first slice that is trunk-narrow again (grass)."""
@@ -176,13 +232,14 @@ def _upside_down(pts: np.ndarray, flipped: np.ndarray, axis: int, grounds: tuple
     return bool((ext[0] > GROUND_WIDE * ext[1]).all())
 
 
-def trunk_on_top(points: np.ndarray) -> bool:
+def trunk_on_top(points: np.ndarray, guess: UpGuess | None = None) -> bool:
     """Whether a Z-up cloud (N, 3) may stand upside down though ``guess_up`` found no ground to say so:
     no ground under it, and its top end is a trunk (``_trunk``: even, narrow slices) over a lowest end
     more than ``FOOT_RATIO`` times wider. Also true of a conifer with a bare leader, a dead top or a pole
-    taller than the tree, so it only asks for a note, never a turn."""
+    taller than the tree, so it only asks for a note, never a turn. ``guess``: ``guess_up`` of ``points``
+    as given (a file read Z up as written), whose search for ground under them is reused (3 ms)."""
     pts = _sample(points)
-    if len(pts) < 20 or _ground(pts, 2) is not None:
+    if len(pts) < 20 or (guess.z_ground if guess is not None else _ground(pts, 2) is not None):
         return False
     flipped = pts * np.array([1.0, 1.0, -1.0])
     top = _foot_widths(flipped, 2)
@@ -254,7 +311,9 @@ def ground_band(pts: np.ndarray, axis: int) -> np.ndarray | None:
     ``GROUND_BAND`` of the extent above their column's lowest point (the surface's, for a column whose
     lowest point is far above it), and up to the first 1 % slice above that is half as wide as the band
     (a trunk rising through grass). Session 18: one plane found by RANSAC missed ground that curved by 4 %
-    of the height, and the tree was turned on its side.
+    of the height, and the tree was turned on its side. Session 20: multipath under the ground became the
+    lowest point of too many columns and hid it (a tree turned Y up at 0.91); it is left out first
+    (``GROUND_PASSES``) and lies in the band.
     """
     h = pts[:, axis]
     lo, hi = np.percentile(h, [0.5, 99.5])
@@ -268,31 +327,60 @@ def ground_band(pts: np.ndarray, axis: int) -> np.ndarray | None:
     if min(shape) < 3:
         return None
     column = np.ravel_multi_index(ij.T, shape)
-    low = np.full(shape[0] * shape[1], np.inf)
-    np.minimum.at(low, column, h)
-    low = np.where(np.isfinite(low), low, np.nan).reshape(shape)
-    surface = _median3(low)
-    slope = np.hypot(*np.gradient(surface, cell))
-    occupied = np.isfinite(low)
+    found, low, surface = _ground_surface(h, column, shape, cell, height)
+    if not found:
+        return None
     with np.errstate(invalid="ignore"):
-        on = occupied & (np.abs(low - surface) < GROUND_TOL * height) & (slope < GROUND_TILT)
-        if occupied.sum() < 20 or on.sum() < GROUND_SHARE * occupied.sum():
-            return None
-        base = np.where(np.isfinite(surface) & (np.abs(low - surface) >= 0.1 * height), surface, low)
+        base = np.where(np.isfinite(surface) & ~(np.abs(low - surface) < 0.1 * height), surface, low)
     up = h - base.ravel()[column]
     return up < _grass_top(up, across, height)
 
 
-def _median3(grid: np.ndarray) -> np.ndarray:
-    """The median of each cell's 3 x 3 neighbourhood of ``grid`` (NaN: empty), NaN where all are empty."""
-    import warnings
+def _ground_surface(h: np.ndarray, column: np.ndarray, shape: tuple, cell: float, height: float) -> tuple:
+    """Whether ``ground_band`` finds ground (``_on_surface``), and the lowest point of each column and the
+    surface it is measured from: found on all the points or, once what lies more than ``GROUND_TOL``
+    under the surface is left out (multipath, ``GROUND_PASSES``), on the rest; the lowest points then
+    exclude it, so the band starts above it."""
+    low, surface = _low_surface(h, column, shape, None)
+    first = (_on_surface(low, surface, cell, height), low, surface)
+    keep, found = np.ones(len(h), dtype=bool), first[0]
+    for k in range(GROUND_PASSES + 1):
+        if k:
+            low, surface = _low_surface(h, column, shape, keep)
+            found = found or _on_surface(low, surface, cell, height)
+        with np.errstate(invalid="ignore"):
+            keep &= ~(h < surface.ravel()[column] - GROUND_TOL * height)
+        if keep.mean() < 1.0 - GROUND_DEEP:  # a crown's or rough ground's own relief, not multipath
+            return first
+    return found, _low_surface(h, column, shape, keep)[0], surface
 
+
+def _on_surface(low: np.ndarray, surface: np.ndarray, cell: float, height: float) -> bool:
+    """Whether at least ``GROUND_SHARE`` of the occupied columns (20 at least) have their lowest point
+    on a smooth, gentle surface (``ground_band``)."""
+    slope = np.hypot(*np.gradient(surface, cell))
+    occupied = np.isfinite(low)
+    on = occupied & (np.abs(low - surface) < GROUND_TOL * height) & (slope < GROUND_TILT)
+    return bool(occupied.sum() >= 20 and on.sum() >= GROUND_SHARE * occupied.sum())
+
+
+def _low_surface(h: np.ndarray, column: np.ndarray, shape: tuple, keep: np.ndarray | None) -> tuple:
+    """The lowest ``keep`` point (None: all) of each column (NaN: none) and the median of its 3 x 3 columns'."""
+    low = np.full(shape[0] * shape[1], np.inf)
+    np.minimum.at(low, column if keep is None else column[keep], h if keep is None else h[keep])
+    low = np.where(np.isfinite(low), low, np.nan).reshape(shape)
+    return low, _median3(low)
+
+
+def _median3(grid: np.ndarray) -> np.ndarray:
+    """The median of each cell's 3 x 3 neighbourhood of ``grid`` (NaN: empty), NaN where all are empty.
+    Sorted by hand: ``np.nanmedian`` over masked arrays took 0.6 ms a call, called 4-12 times a guess."""
     pad = np.pad(grid, 1, constant_values=np.nan)
     rows, cols = grid.shape
-    stack = np.stack([pad[i:i + rows, j:j + cols] for i in range(3) for j in range(3)], axis=2)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN neighbourhoods
-        return np.nanmedian(stack, axis=2)
+    stack = np.sort(np.stack([pad[i:i + rows, j:j + cols] for i in range(3) for j in range(3)], axis=2), axis=2)
+    n = np.isfinite(stack).sum(axis=2, keepdims=True)  # NaN sorts last
+    half = np.take_along_axis(stack, np.maximum(n - 1, 0) // 2, 2) + np.take_along_axis(stack, n // 2 - (n == 0), 2)
+    return np.where(n > 0, 0.5 * half, np.nan)[:, :, 0]
 
 
 def _grass_top(up: np.ndarray, across: np.ndarray, height: float) -> float:
