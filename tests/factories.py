@@ -353,3 +353,15 @@ def ground_disc(tree: tuple[np.ndarray, float], surface, n: int, radius: float =
     r, a = radius * h * np.sqrt(rng.uniform(0, 1, n)), rng.uniform(0, 2 * np.pi, n)
     x, y = r * np.cos(a), r * np.sin(a)
     return np.c_[x, y, pts[:, 2].min() + h * surface(x / h, y / h)]
+
+
+def las_file(path: Path, pts: np.ndarray, scale: float = 1e-4) -> Path:
+    """``pts`` (N, 3) written to ``path`` (.las or .laz), point format 3, ``scale`` metres per unit."""
+    import laspy
+
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales, header.offsets = np.full(3, scale), pts.min(axis=0)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = pts[:, 0], pts[:, 1], pts[:, 2]
+    las.write(str(path))
+    return path

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 
-import laspy
 import numpy as np
 
 from arboretum_library.assets import sample_scans
@@ -14,18 +13,10 @@ from arboretum_library.cli import main
 from arboretum_library.geometry import zup_to_yup
 from arboretum_library.pointio import ReadOptions, read_points
 from arboretum_server.decompose.notes import las_doubt
+from factories import las_file as _las
 
 COFFEE = sample_scans()[0]
 SMALL = ["--points", "3000", "--main", "3", "--lobes", "6"]
-
-
-def _las(path, pts: np.ndarray):
-    header = laspy.LasHeader(point_format=3, version="1.2")
-    header.scales, header.offsets = np.array([1e-4, 1e-4, 1e-4]), pts.min(axis=0)
-    las = laspy.LasData(header)
-    las.x, las.y, las.z = pts[:, 0], pts[:, 1], pts[:, 2]
-    las.write(str(path))
-    return path
 
 
 def test_a_y_up_las_gets_the_note_and_decomposes_with_up_y(tmp_path, capsys):
@@ -35,7 +26,7 @@ def test_a_y_up_las_gets_the_note_and_decomposes_with_up_y(tmp_path, capsys):
     code = main(["decompose", str(lying), "--json", *SMALL])
     said = capsys.readouterr()
     text = said.out if code == 0 else said.err
-    assert "the LAS file is read Z up, as its format defines, but its shape looks y up" in text
+    assert "the LAS file is read Z up, as its format defines, but its shape says y " in text
     assert "pass --up y" in text
     assert main(["decompose", str(lying), "--up", "y", "--json", *SMALL]) == 0
     by_hand = json.loads(capsys.readouterr().out)
@@ -54,3 +45,18 @@ def test_las_doubt_only_for_las_read_z_up_by_auto(tmp_path):
     ply = read_points(COFFEE, ReadOptions(up="z"))
     assert las_doubt(ply, "auto") is None  # not a LAS file
     assert las_doubt(read_points(_las(tmp_path / "u.las", coffee)), "auto") is None  # its shape agrees
+
+
+def test_an_upside_down_las_refused_or_noted_names_z_down(tmp_path, capsys):
+    coffee = read_points(COFFEE, ReadOptions(up="z")).points
+    h, foot = float(np.ptp(coffee[:, 2])), coffee[np.argmin(coffee[:, 2])]
+    rng = np.random.default_rng(0)
+    a, r = rng.uniform(0, 2 * np.pi, 8000), 1.5 * h * np.sqrt(rng.uniform(0, 1, 8000))
+    disc = np.c_[foot[0] + r * np.cos(a), foot[1] + r * np.sin(a), foot[2] + rng.normal(0, 0.003, 8000)]
+    down = _las(tmp_path / "down.las", np.r_[coffee, disc] * [1, -1, -1])
+    code = main(["decompose", str(down), "--json", *SMALL])
+    said = capsys.readouterr()
+    assert "its shape says z-down" in (said.out if code == 0 else said.err)
+    assert "pass --up z-down" in (said.out if code == 0 else said.err)
+    assert main(["decompose", str(down), "--up", "z-down", "--json", *SMALL]) == 0
+    assert json.loads(capsys.readouterr().out)["stats"]["main_branches"] == 3

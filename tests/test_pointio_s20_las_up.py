@@ -6,7 +6,6 @@ which option reads the file the guess's way when it is sure. Other formats keep 
 
 from __future__ import annotations
 
-import laspy
 import numpy as np
 import pytest
 
@@ -14,6 +13,7 @@ from arboretum_library.commands.scan import format_stats
 from arboretum_library.geometry import zup_to_yup
 from arboretum_library.pointio import ReadOptions, read_points, scan_stats, write_points
 from arboretum_library.pointio_up import guess_up
+from factories import las_file as _las
 
 
 def _tree(seed: int = 1) -> np.ndarray:
@@ -24,16 +24,6 @@ def _tree(seed: int = 1) -> np.ndarray:
     d = rng.normal(size=(6000, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     return np.concatenate([trunk, d * 1.5 * rng.uniform(0.6, 1.0, (6000, 1)) + [0, 0, 4.5]])
-
-
-def _las(path, pts: np.ndarray):
-    header = laspy.LasHeader(point_format=3, version="1.2")
-    header.scales = np.array([0.001, 0.001, 0.001])
-    header.offsets = pts.min(axis=0)
-    las = laspy.LasData(header)
-    las.x, las.y, las.z = pts[:, 0], pts[:, 1], pts[:, 2]
-    las.write(str(path))
-    return path
 
 
 @pytest.mark.parametrize("ext", [".las", ".laz"])
@@ -61,6 +51,7 @@ def test_scan_info_names_the_option_for_a_las_whose_shape_disagrees(tmp_path):
     assert (s["up_axis"], s["up_guess"]) == ("z", "y") and s["up_confidence"] > 0.95
     line = next(x for x in format_stats(s).splitlines() if "up axis" in x)
     assert "LAS is Z up by its format" in line and line.endswith("pass --up y if the file is not")
+    assert "LAS" not in format_stats(s, up_asked="z")  # the user said Z: no advice
     upright = scan_stats(read_points(_las(tmp_path / "upright.las", _tree())))
     assert (upright["up_axis"], upright["up_guess"]) == ("z", "z")
     assert "LAS" not in format_stats(upright)
@@ -79,3 +70,16 @@ def test_scan_stats_reuses_the_guess_read_points_made(tmp_path, monkeypatch):
     assert given.up_guess is None
     monkeypatch.undo()
     assert scan_stats(given)["up_guess"] == "z"
+
+
+def test_an_upside_down_las_on_its_ground_names_z_down(tmp_path):
+    tree = _tree()
+    rng = np.random.default_rng(3)
+    r, a = 8.0 * np.sqrt(rng.uniform(0, 1, 8000)), rng.uniform(0, 2 * np.pi, 8000)
+    ground = np.c_[r * np.cos(a), r * np.sin(a), rng.normal(0, 0.01, 8000)]
+    down = np.r_[tree, ground] * [1, -1, -1]
+    cloud = read_points(_las(tmp_path / "down.las", down, scale=0.001))
+    assert cloud.up_axis == "z"
+    s = scan_stats(cloud)
+    assert (s["up_guess"], s["up_by_shape"]) == ("z-down", "z-down")
+    assert "LAS is Z up by its format, so the guess was not applied: pass --up z-down" in format_stats(s)

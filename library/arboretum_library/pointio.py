@@ -29,9 +29,19 @@ from .pointio_pcd import read_pcd
 from .pointio_spatial import column_bounds, even_sample_indices, median_spacing, trunk_base
 from .pointio_stats import precision_note, scan_stats
 from .pointio_text import read_text
-from .pointio_up import UP_DIRECTIONS, UpGuess, guess_up, guess_up_axis, turn_to_zup
+from .pointio_up import (
+    AUTO_Y_CONFIDENCE,
+    UP_DIRECTIONS,
+    UpGuess,
+    auto_up,
+    guess_up,
+    guess_up_axis,
+    turn_to_zup,
+)
 
 __all__ = [
+    "AUTO_Y_CONFIDENCE",
+    "auto_up",
     "PointCloud",
     "ReadOptions",
     "VRTREE_PREPROCESS",
@@ -160,20 +170,10 @@ MAX_COORDINATE = 1e12
 directly) accept, in any unit: geocentric coordinates in millimetres stay under 1e10, while near 1e154
 squared distances, and near 1e308 extents, overflow float64."""
 
-AUTO_Y_CONFIDENCE = 0.75
-"""With ``up='auto'`` a file is turned from Y up only when ``guess_up_axis`` says 'y' this surely."""
-
-
 Z_UP_SUFFIXES = (".las", ".laz")
 """Formats whose Z is up by definition (ASPRS LAS: Z is elevation): ``up='auto'`` reads them Z up without
 a guess. A wall, a fence or returns under the ground could turn a guess; they cannot turn a LAS file."""
 
-
-def auto_up(guess: UpGuess) -> str:
-    """The way up ``up='auto'`` reads a file with: the guess on Y only at ``AUTO_Y_CONFIDENCE``, else
-    Z, upside down or not as the guess found it along Z."""
-    on_y = guess.direction.startswith("y") and guess.confidence >= AUTO_Y_CONFIDENCE
-    return guess.direction if on_y else guess.z_direction
 
 VRTREE_PREPROCESS = ReadOptions(recentre=True, target_height=0.8, max_points=12_000)
 """The preprocessing of VRTree section 4.1 (Data preprocessing): 12,000 points scaled to 0.8 m."""

@@ -10,7 +10,7 @@ import numpy as np
 
 from .model import LEAF
 from .pointio_spatial import column_bounds, median_spacing
-from .pointio_up import guess_up, turn_from_zup
+from .pointio_up import auto_up, guess_up, turn_from_zup
 from .repeats import distinct_rows
 
 if TYPE_CHECKING:
@@ -81,7 +81,9 @@ def scan_stats(cloud: PointCloud, seed: int = 0) -> dict[str, Any]:
     """Summary of a cloud (JSON-ready): counts, extent, height, up axis and its guess, point spacing.
 
     ``up_axis`` is the way up the file was read with ('z-down' / 'y-down': it stood upside down and was
-    turned); ``up_guess`` and ``up_confidence`` are ``guess_up`` on the points in the file's own frame.
+    turned); ``up_guess`` and ``up_confidence`` are ``guess_up`` on the points in the file's own frame,
+    ``up_by_shape`` the way ``--up auto`` reads a file with that guess (``pointio.auto_up``; LAS and LAZ are
+    read Z up whatever it says).
     ``spacing`` is the median nearest-neighbour distance over up to 2,000 sampled points (metres).
     """
     pts = cloud.points
@@ -97,6 +99,7 @@ def scan_stats(cloud: PointCloud, seed: int = 0) -> dict[str, Any]:
         "up_axis": cloud.up_axis,
         "up_guess": guess.direction,
         "up_confidence": round(guess.confidence, 3),
+        "up_by_shape": auto_up(guess),
         "spacing": median_spacing(pts, np.random.default_rng(seed)),
         "has_colors": cloud.colors is not None,
         "has_labels": cloud.labels is not None,

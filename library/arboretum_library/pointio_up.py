@@ -123,21 +123,25 @@ WALL_BAND, WALL_SHARE, WALL_THIN, WALL_LOW = 0.01, 0.05, 0.6, 0.5
 """A wall beside a tree with no ground (``_wall``): the points within this fraction of the largest extent
 of a line in the footprint; its thin core (a quarter of that) holds at least this share of the points
 and this share of the band's, 90 % of them in this lowest fraction of the extent along the axis."""
-WALL_TRIES, WALL_SAMPLE = 100, 4000
-"""``_wall`` tries this many lines through two points of a fixed random sample of this many."""
+WALL_TRIES, WALL_SAMPLE, WALL_KEEP = 100, 4000, 20
+"""``_wall`` tries this many lines through two points of a fixed random sample of this many; a wall's
+core holds, and leaves, at least this many points."""
 
 
 def _wall(pts: np.ndarray, axis: int) -> np.ndarray:
-    """(N,) bool: the points of a wall (or a fence) standing along ``axis`` beside the tree, all False when
-    none. On a fixed random ``WALL_SAMPLE`` of the points, the line in the footprint across ``axis``
-    holding the most of the lower half's points within a quarter of ``WALL_BAND`` (``WALL_TRIES`` lines
-    through two of them) is a wall when that thin band holds ``WALL_SHARE`` of the points and
-    ``WALL_THIN`` of those within ``WALL_BAND`` (a wall is thin; a slice of crown is not), and 90 % of
-    them lie in the lowest ``WALL_LOW`` of the extent along ``axis`` (a wall is lower than the tree; a
-    row's trunks are not). Its points there are the wall (a crown may reach over it)."""
+    """(N,) bool: the points of a wall (or a fence) standing along ``axis`` beside the tree, all False
+    when none. On ``WALL_SAMPLE`` points drawn at random (fixed; with repeats; all of a smaller cloud),
+    the line in the footprint across ``axis`` holding the most of the lower half's points within a quarter
+    of ``WALL_BAND`` (``WALL_TRIES`` lines through two of them) is a wall when that thin band holds
+    ``WALL_SHARE`` of the points and ``WALL_THIN`` of those within ``WALL_BAND`` (a wall is thin; a slice
+    of crown is not), and 90 % of them lie in the lowest ``WALL_LOW`` of the extent along ``axis`` (a wall
+    is lower than the tree; a row's trunks are not). Its points there are the wall (a crown may reach over
+    it). A wall has at least ``WALL_KEEP`` points in its core and leaves as many to score."""
     none = np.zeros(len(pts), dtype=bool)
+    if len(pts) < WALL_KEEP:  # 3 points drawn 4,000 times made a "wall" of 2 and left 1 to score
+        return none
     rng = np.random.default_rng(0)
-    sub = pts[rng.integers(0, len(pts), WALL_SAMPLE)]
+    sub = pts if len(pts) <= WALL_SAMPLE else pts[rng.integers(0, len(pts), WALL_SAMPLE)]
     lo, hi = np.percentile(sub[:, axis], [0.5, 99.5])
     top = lo + WALL_LOW * (hi - lo)
     low = np.delete(sub[sub[:, axis] < top], axis, axis=1)
@@ -154,11 +158,12 @@ def _wall(pts: np.ndarray, axis: int) -> np.ndarray:
     best = int(np.argmax((np.abs(low @ n.T - off) < 0.25 * band).sum(axis=0)))
     dist = np.abs(np.delete(sub, axis, axis=1) @ n[best] - off[best])
     thin = dist < 0.25 * band
-    if thin.mean() < WALL_SHARE or thin.sum() < WALL_THIN * (dist < band).sum():
+    if thin.mean() < WALL_SHARE or thin.sum() < max(WALL_KEEP, WALL_THIN * (dist < band).sum()):
         return none
     if (sub[thin, axis] < top).mean() < 0.9:
         return none
-    return (np.abs(np.delete(pts, axis, axis=1) @ n[best] - off[best]) < band) & (pts[:, axis] < top)
+    wall = (np.abs(np.delete(pts, axis, axis=1) @ n[best] - off[best]) < band) & (pts[:, axis] < top)
+    return wall if (~wall).sum() >= WALL_KEEP else none
 
 
 def _ground(pts: np.ndarray, axis: int) -> np.ndarray | None:
@@ -223,13 +228,44 @@ def _upside_down(pts: np.ndarray, flipped: np.ndarray, axis: int, grounds: tuple
     if not (under[1] < GROUND_UNDER <= under[0]):  # a wall found as ground from both ends: no way up
         return False
     rest = flipped[~grounds[1]]
-    if len(rest) == 0:
+    if len(rest) == 0 or not _planar(flipped, axis, grounds[1]):  # a crown's dome seen from above
         return False
     if _foot_widths(rest, axis).min() < TRUNK_NARROW:
         return True
     across = np.delete(flipped, axis, axis=1)  # no trunk seen: ground reaching out beyond the rest both ways
     ext = [np.subtract(*np.percentile(a, [97.5, 2.5], axis=0)) for a in (across[grounds[1]], across[~grounds[1]])]
     return bool((ext[0] > GROUND_WIDE * ext[1]).all())
+
+
+GROUND_PLANE, PLANE_SHARE = 0.08, 0.75
+"""Ground that turns a file lies near one plane: ``PLANE_SHARE`` of its columns within this fraction of
+the extent along the axis (``_planar``)."""
+
+
+def _planar(pts: np.ndarray, axis: int, ground: np.ndarray) -> bool:
+    """Whether the ground surface of ``pts`` (N, 3) (the middle ``ground`` point of each ``GROUND_CELLS``
+    column: multipath lies under it) lies near one plane: ``PLANE_SHARE`` of it within ``GROUND_PLANE`` of
+    the extent along ``axis`` of the plane fitted to its closest three quarters (thrice; in a sparse scan
+    some columns' band points are the tree's). A leaf-off crown's top read from above is a smooth,
+    gentle surface too, and the band over it swallows the crown, leaving the trunk to stand on it: the toy
+    tree's leaf-off scans were turned upside down in 11 of 18 (up to 0.999 sure). Their domes (4 or 6
+    limbs) measure 0.096-0.147 (three quarters of the columns); ground discs under 22 shapes, 2,000 or
+    30,000 points, at most 0.009; a bowl 12 % of the tree's height deep, or a dome or valley 16 %, passes."""
+    g = pts[ground]
+    across = np.delete(g, axis, axis=1)
+    ij = np.floor((across - column_bounds(across)[0]) / (_largest_extent(pts) / GROUND_CELLS)).astype(np.int64)
+    column = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
+    order = np.lexsort((g[:, axis], column))
+    starts = np.flatnonzero(np.r_[True, np.diff(column[order]) != 0])
+    ends = np.r_[starts[1:], len(order)]
+    first = order[(starts + ends) // 2]  # the middle point of each column (multipath lies under it)
+    design, height = np.c_[across[first], np.ones(len(first))], g[first, axis]
+    fit_to = np.ones(len(first), dtype=bool)
+    for _ in range(3):
+        fit = np.linalg.lstsq(design[fit_to], height[fit_to], rcond=None)[0]
+        off = np.abs(height - design @ fit)
+        fit_to = off <= np.percentile(off, 75)
+    return bool(np.percentile(off, 100 * PLANE_SHARE) <= GROUND_PLANE * float(np.ptp(pts[:, axis])))
 
 
 def trunk_on_top(points: np.ndarray, guess: UpGuess | None = None) -> bool:
@@ -409,3 +445,14 @@ def _largest_extent(pts: np.ndarray) -> float:
     """The largest extent of ``pts`` (N, 3) along an axis: ``np.ptp(pts, axis=0).max()``, faster."""
     lo, hi = column_bounds(pts)
     return float((hi - lo).max())
+
+
+AUTO_Y_CONFIDENCE = 0.75
+"""With ``up='auto'`` a file is turned from Y up only when ``guess_up_axis`` says 'y' this surely."""
+
+
+def auto_up(guess: UpGuess) -> str:
+    """The way up ``up='auto'`` reads a file with: the guess on Y only at ``AUTO_Y_CONFIDENCE``, else
+    Z, upside down or not as the guess found it along Z."""
+    on_y = guess.direction.startswith("y") and guess.confidence >= AUTO_Y_CONFIDENCE
+    return guess.direction if on_y else guess.z_direction

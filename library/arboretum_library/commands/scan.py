@@ -72,12 +72,12 @@ def run_info(args: argparse.Namespace) -> int:
 
     options = ReadOptions(up=args.up)
     stats = [scan_stats(read_points(f, options)) for f in args.files]
-    emit(args, stats, "\n\n".join(format_stats(s) for s in stats))
+    emit(args, stats, "\n\n".join(format_stats(s, args.up) for s in stats))
     return 0
 
 
-def format_stats(s: dict) -> str:
-    """Human text of one ``scan_stats`` dict."""
+def format_stats(s: dict, up_asked: str = "auto") -> str:
+    """Human text of one ``scan_stats`` dict of a file read with ``--up up_asked``."""
     extent = "  ".join(
         f"{a} {lo:.3f} .. {hi:.3f} ({size:.3f} m)"
         for a, lo, hi, size in zip("xyz", s["min"], s["max"], s["size"])
@@ -97,7 +97,7 @@ def format_stats(s: dict) -> str:
         f"  extent     {extent}",
         f"  height     {s['height']:.3f} m",
         f"  up axis    {_way_up(s['up_axis'])} "
-        f"(guess {s['up_guess']}, confidence {s['up_confidence']:.2f}){_las_doubt(s)}",
+        f"(guess {s['up_guess']}, confidence {s['up_confidence']:.2f}){_las_doubt(s, up_asked)}",
         f"  spacing    {s['spacing'] * 1000:.1f} mm (median nearest-neighbour distance)",
         f"  attributes {', '.join(attrs) if attrs else 'none'}",
     ]
@@ -106,15 +106,16 @@ def format_stats(s: dict) -> str:
     return "\n".join(lines)
 
 
-def _las_doubt(s: dict) -> str:
-    """For a LAS/LAZ file read Z up (its format's way, see ``pointio.Z_UP_SUFFIXES``) whose shape
-    suggests otherwise: the option that reads it as the guess says, else ''."""
-    from arboretum_library.pointio import AUTO_Y_CONFIDENCE, Z_UP_SUFFIXES
-
-    guess, sure = s["up_guess"], s["up_confidence"] >= AUTO_Y_CONFIDENCE or s["up_guess"] == "z-down"
-    if not s["file"].lower().endswith(Z_UP_SUFFIXES) or s["up_axis"] != "z" or guess == "z" or not sure:
+def _las_doubt(s: dict, up_asked: str) -> str:
+    """For a LAS/LAZ file read Z up by ``--up auto`` (its format's way, ``pointio.las_way``) whose shape
+    says another way: the option that reads it that way, else ''."""
+    if up_asked != "auto" or s["up_axis"] != "z" or s["up_by_shape"] == "z":
         return ""
-    return f"; LAS is Z up by its format, so the guess was not applied: pass --up {guess} if the file is not"
+    from arboretum_library.pointio import Z_UP_SUFFIXES
+
+    if not s["file"].lower().endswith(Z_UP_SUFFIXES):
+        return ""
+    return f"; LAS is Z up by its format, so the guess was not applied: pass --up {s['up_by_shape']} if the file is not"
 
 
 def _way_up(up_axis: str) -> str:

@@ -79,13 +79,14 @@ def upside_down_note(up_asked: str, up_read: str, build: bool = False) -> str | 
             f"(--up {up_read}); to read it as written, {how}")
 
 
-def upside_down_doubt(points_zup, up_read: str, build: bool = False) -> str | None:
+def upside_down_doubt(points_zup, up_read: str, build: bool = False, guess=None) -> str | None:
     """A note when the cloud as read (Z up, ``up_read``) may stand upside down but no ground says so
     (``pointio_up.trunk_on_top``: a trunk-like top over a much wider foot; a conifer's bare leader, a dead
-    top or a pole beside the tree look the same, so ``--up auto`` never turns such a file), else None."""
+    top or a pole beside the tree look the same, so ``--up auto`` never turns such a file), else None.
+    ``guess``: ``read_points``' ``guess_up`` of a file read Z up as written, whose ground search is reused."""
     from arboretum_library.pointio_up import trunk_on_top
 
-    if not trunk_on_top(points_zup):
+    if not trunk_on_top(points_zup, guess):
         return None
     other = _OTHER_WAY[up_read]
     how = _pass_up(other, build)
@@ -94,24 +95,24 @@ def upside_down_doubt(points_zup, up_read: str, build: bool = False) -> str | No
 
 
 def las_doubt(cloud, up_asked: str, build: bool = False) -> str | None:
-    """A note when ``--up auto`` read a LAS/LAZ file Z up, as its format defines (``pointio.Z_UP_SUFFIXES``,
-    no guess), but its shape says Y up as surely as a guess must be to turn other files
-    (``pointio.AUTO_Y_CONFIDENCE``); else None. ``cloud`` as ``read_points`` gave it."""
-    from arboretum_library.pointio import AUTO_Y_CONFIDENCE, Z_UP_SUFFIXES
+    """A note when ``--up auto`` read a LAS/LAZ file Z up, as its format defines, but its shape says
+    another way up as surely as a guess must be to turn other files (``pointio.auto_up``: Y up, or upside
+    down on its ground); else None. ``cloud`` as ``read_points`` gave it."""
+    from arboretum_library.pointio import Z_UP_SUFFIXES, auto_up
     from arboretum_library.pointio_up import guess_up
 
     if up_asked != "auto" or cloud.up_axis != "z" or not cloud.source.lower().endswith(Z_UP_SUFFIXES):
         return None
-    guess = guess_up(cloud.points)
-    if not guess.direction.startswith("y") or guess.confidence < AUTO_Y_CONFIDENCE:
+    if (way := auto_up(guess_up(cloud.points))) == "z":
         return None
-    return (f"the LAS file is read Z up, as its format defines, but its shape looks {guess.direction} up "
-            f"(confidence {guess.confidence:.2f}): if it is, {_pass_up(guess.direction, build)}")
+    return (f"the LAS file is read Z up, as its format defines, but its shape says {way} "
+            f"(the way --up auto reads other files): if it is, {_pass_up(way, build)}")
 
 
 def up_doubts(cloud, up_asked: str, build: bool = False) -> str | None:
     """``las_doubt`` and ``upside_down_doubt`` of ``cloud`` as one note, or None."""
-    said = [las_doubt(cloud, up_asked, build), upside_down_doubt(cloud.points, cloud.up_axis, build)]
+    guess = cloud.up_guess if cloud.up_axis == "z" else None  # its ground search, along Z as read
+    said = [las_doubt(cloud, up_asked, build), upside_down_doubt(cloud.points, cloud.up_axis, build, guess)]
     return "; ".join(n for n in said if n) or None
 
 
