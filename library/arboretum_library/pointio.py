@@ -175,6 +175,12 @@ Z_UP_SUFFIXES = (".las", ".laz")
 a guess. A wall, a fence or returns under the ground could turn a guess; they cannot turn a LAS file."""
 
 
+def z_up_by_format(path: str | Path, up_asked: str) -> bool:
+    """Whether ``--up up_asked`` reads the file at ``path`` Z up by its format, without a guess: 'auto' on
+    a LAS or LAZ file (``Z_UP_SUFFIXES``)."""
+    return up_asked == "auto" and str(path).lower().endswith(Z_UP_SUFFIXES)
+
+
 VRTREE_PREPROCESS = ReadOptions(recentre=True, target_height=0.8, max_points=12_000)
 """The preprocessing of VRTree section 4.1 (Data preprocessing): 12,000 points scaled to 0.8 m."""
 
@@ -191,7 +197,7 @@ def read_points(path: str | Path, options: ReadOptions = ReadOptions()) -> Point
     raw = _read_raw(path)
     points = _checked_points(path, raw)
     up, guess = options.up, None
-    if up == "auto" and path.suffix.lower() in Z_UP_SUFFIXES:
+    if z_up_by_format(path, up):
         up = "z"
     elif up == "auto":
         guess = guess_up(points)

@@ -107,13 +107,11 @@ def format_stats(s: dict, up_asked: str = "auto") -> str:
 
 
 def _las_doubt(s: dict, up_asked: str) -> str:
-    """For a LAS/LAZ file read Z up by ``--up auto`` (its format's way, ``pointio.las_way``) whose shape
-    says another way: the option that reads it that way, else ''."""
-    if up_asked != "auto" or s["up_axis"] != "z" or s["up_by_shape"] == "z":
-        return ""
-    from arboretum_library.pointio import Z_UP_SUFFIXES
+    """For a file read Z up by its format (``pointio.z_up_by_format``: LAS, LAZ) whose shape says another
+    way (``up_by_shape``): the option that reads it that way, else ''."""
+    from arboretum_library.pointio import z_up_by_format
 
-    if not s["file"].lower().endswith(Z_UP_SUFFIXES):
+    if s["up_by_shape"] == "z" or not z_up_by_format(s["file"], up_asked):
         return ""
     return f"; LAS is Z up by its format, so the guess was not applied: pass --up {s['up_by_shape']} if the file is not"
 

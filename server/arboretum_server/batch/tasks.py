@@ -172,7 +172,7 @@ def _decompose(path: str, sha256: str, options: dict[str, Any], t0: float) -> Sc
     # the file's own precision, kept with the notes; by file name: the build's line names the path, and a
     # refusal is cut at 500 characters
     coarse = precision_note(replace(cloud, source=os.path.basename(path)), points=opts.points)
-    doubt = up_doubts(cloud, "auto", build=True)  # a trunk-like top and no ground; a LAS shaped Y up
+    doubt = up_doubts(cloud, "auto", build=True)  # a trunk-like top and no ground; a LAS shaped another way
     try:
         dec = decompose(cloud.points, opts, labels=cloud.labels)
     except InputError as exc:  # on a coarse grid the refusal names the symptom: say the cause too

@@ -157,7 +157,7 @@ def _run(args: argparse.Namespace) -> int:
                 emit(args, data, _text(data))
                 return 0
             coarse = precision_note(cloud, points=options.points)  # float32 at UTM: the points sit on a 0.5 m grid
-            doubt = up_doubts(cloud, args.up)  # a trunk-like top and no ground; a LAS shaped Y up
+            doubt = up_doubts(cloud, args.up)  # a trunk-like top and no ground; a LAS shaped another way
             dec = _decompose(args.scan, cloud, options, status, coarse, doubt)
             if args.save_hbl:
                 _save_hbl(args.save_hbl, dec.hbl)

@@ -98,10 +98,10 @@ def las_doubt(cloud, up_asked: str, build: bool = False) -> str | None:
     """A note when ``--up auto`` read a LAS/LAZ file Z up, as its format defines, but its shape says
     another way up as surely as a guess must be to turn other files (``pointio.auto_up``: Y up, or upside
     down on its ground); else None. ``cloud`` as ``read_points`` gave it."""
-    from arboretum_library.pointio import Z_UP_SUFFIXES, auto_up
+    from arboretum_library.pointio import auto_up, z_up_by_format
     from arboretum_library.pointio_up import guess_up
 
-    if up_asked != "auto" or cloud.up_axis != "z" or not cloud.source.lower().endswith(Z_UP_SUFFIXES):
+    if not z_up_by_format(cloud.source, up_asked):
         return None
     if (way := auto_up(guess_up(cloud.points))) == "z":
         return None
