@@ -29,7 +29,7 @@ class UpGuess:
     z_direction: str
     """'z' or 'z-down': the way up along Z, for a file kept on Z when the confidence is too low for Y."""
     z_ground: bool = False
-    """Whether ground lies under the cloud along +Z as given (``ground_band``): ``trunk_on_top`` reuses it."""
+    """Whether ground lies under the cloud along +Z as given (``_ground``): ``trunk_on_top`` reuses it."""
 
 
 def guess_up(points: np.ndarray) -> UpGuess:
@@ -145,7 +145,7 @@ def _wall(pts: np.ndarray, axis: int) -> np.ndarray:
     lo, hi = np.percentile(sub[:, axis], [0.5, 99.5])
     top = lo + WALL_LOW * (hi - lo)
     low = np.delete(sub[sub[:, axis] < top], axis, axis=1)
-    if len(low) < 20 or not hi > lo:
+    if len(low) < WALL_KEEP or not hi > lo:
         return none
     a, b = low[rng.integers(0, len(low), WALL_TRIES)], low[rng.integers(0, len(low), WALL_TRIES)]
     d = b - a
@@ -253,14 +253,12 @@ def _planar(pts: np.ndarray, axis: int, ground: np.ndarray) -> bool:
     30,000 points, at most 0.009; a bowl 12 % of the tree's height deep, or a dome or valley 16 %, passes."""
     g = pts[ground]
     across = np.delete(g, axis, axis=1)
-    ij = np.floor((across - column_bounds(across)[0]) / (_largest_extent(pts) / GROUND_CELLS)).astype(np.int64)
-    column = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
+    column = _columns(across, _largest_extent(pts) / GROUND_CELLS)[0]
     order = np.lexsort((g[:, axis], column))
     starts = np.flatnonzero(np.r_[True, np.diff(column[order]) != 0])
-    ends = np.r_[starts[1:], len(order)]
-    first = order[(starts + ends) // 2]  # the middle point of each column (multipath lies under it)
-    design, height = np.c_[across[first], np.ones(len(first))], g[first, axis]
-    fit_to = np.ones(len(first), dtype=bool)
+    mid = order[(starts + np.r_[starts[1:], len(order)]) // 2]  # each column's middle point (multipath lies under it)
+    design, height = np.c_[across[mid], np.ones(len(mid))], g[mid, axis]
+    fit_to = np.ones(len(mid), dtype=bool)
     for _ in range(3):
         fit = np.linalg.lstsq(design[fit_to], height[fit_to], rcond=None)[0]
         off = np.abs(height - design @ fit)
@@ -358,11 +356,9 @@ def ground_band(pts: np.ndarray, axis: int) -> np.ndarray | None:
     cell = _largest_extent(pts) / GROUND_CELLS
     if height <= 0 or cell <= 0:
         return None
-    ij = np.floor((across - column_bounds(across)[0]) / cell).astype(np.int64)
-    shape = tuple(column_bounds(ij)[1] + 1)
+    column, shape = _columns(across, cell)
     if min(shape) < 3:
         return None
-    column = np.ravel_multi_index(ij.T, shape)
     found, low, surface = _ground_surface(h, column, shape, cell, height)
     if not found:
         return None
@@ -370,6 +366,14 @@ def ground_band(pts: np.ndarray, axis: int) -> np.ndarray | None:
         base = np.where(np.isfinite(surface) & ~(np.abs(low - surface) < 0.1 * height), surface, low)
     up = h - base.ravel()[column]
     return up < _grass_top(up, across, height)
+
+
+def _columns(across: np.ndarray, cell: float) -> tuple[np.ndarray, tuple[int, int]]:
+    """The column (flat index) of each point of ``across`` (N, 2) on a grid of ``cell``-wide columns from
+    its lowest corner, and the grid's shape."""
+    ij = np.floor((across - column_bounds(across)[0]) / cell).astype(np.int64)
+    shape = tuple(column_bounds(ij)[1] + 1)
+    return np.ravel_multi_index(ij.T, shape), shape
 
 
 def _ground_surface(h: np.ndarray, column: np.ndarray, shape: tuple, cell: float, height: float) -> tuple:
