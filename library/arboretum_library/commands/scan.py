@@ -164,6 +164,7 @@ def run_convert(args: argparse.Namespace) -> int:
     stats = scan_stats(cloud)
     stats["file"] = str(out)
     stats["input"] = args.input
-    text = f"wrote {out}: {len(cloud):,} points, height {stats['height']:.3f} m (from {args.input}, up {_way_up(cloud.up_axis)})"
+    doubt = _las_doubt({**stats, "file": args.input}, args.up)
+    text = f"wrote {out}: {len(cloud):,} points, height {stats['height']:.3f} m (from {args.input}, up {_way_up(cloud.up_axis)}{doubt})"
     emit(args, stats, text)
     return 0
