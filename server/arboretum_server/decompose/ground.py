@@ -40,6 +40,10 @@ GROUND_HELD = 3
 """``held``: a column's ground sample has this many points of its column just above it (2 let 5 %
 uniform outliers hold some of scan 10's columns 2-12 % of the height under its ground, which was then
 missed in 8 of 10 draws)."""
+GROUND_HELD_MORE = (6, 12, 24)
+"""``held``'s counts tried in turn after ``GROUND_HELD``: 10-20 % uniform outliers held each other 3 deep
+down to their box's floor under scan 10's ground, which was missed in 9-20 of 20 draws (the root 4-24 %
+of the height under it)."""
 GROUND_DITCH = 0.1
 """``_dips`` follows a column deeper than ``GROUND_DIP`` down to this fraction of the height below the
 ground when a chain of columns, each at most ``GROUND_WALL`` deeper than the last, leads to it from a
@@ -93,13 +97,13 @@ def _columns_low_first(xy: np.ndarray, z: np.ndarray, cell: float) -> tuple[np.n
     return order, np.r_[True, key[order][1:] != key[order][:-1]]
 
 
-def held(z: np.ndarray, order: np.ndarray, first: np.ndarray, gap: float) -> tuple[np.ndarray, np.ndarray]:
+def held(z: np.ndarray, order: np.ndarray, first: np.ndarray, gap: float,
+         k: int = GROUND_HELD) -> tuple[np.ndarray, np.ndarray]:
     """(order, first) of ``_columns_low_first`` (``order``, ``first``: over heights ``z`` (N,)) kept to the
-    points that have ``GROUND_HELD`` more points of their column within ``gap`` above them (a lone
-    outlier has none): each column's ``first`` is then its lowest such point."""
+    points that have ``k`` more points of their column within ``gap`` above them (a lone outlier has
+    none): each column's ``first`` is then its lowest such point."""
     col = np.cumsum(first) - 1
     zs = z[order]
-    k = GROUND_HELD
     ok = np.zeros(len(zs), bool)
     ok[:-k] = (col[k:] == col[:-k]) & (zs[k:] - zs[:-k] < gap)
     col = col[ok]
@@ -193,7 +197,9 @@ def find_ground(pts: np.ndarray, band_frac: float) -> tuple[np.ndarray, Ground |
     with ``GROUND_HELD`` others of their column just above them (``held``), the columns are sampled once
     more by their lowest held point, with the scales taken from the held points: outliers strewn under a
     small ground were the minima of most columns and stretched the span (scan 10, its ground 2.5 m wide,
-    with 1-3 % uniform outliers: its ground was kept, the root 4 m under it). When that finds none either,
+    with 1-3 % uniform outliers: its ground was kept, the root 4 m under it); when so many outliers hold
+    each other that the held points reach the floor too, with more of them held (``GROUND_HELD_MORE``).
+    When that finds none either,
     the first search's surface holding fewer than ``GROUND_SHARE`` of the points (``_surface`` keeps
     it; it is not searched for again) is taken after all: the floor of
     outliers strewn under a tree with no ground, cut with the strays below the tree (scan 07 with
@@ -217,32 +223,62 @@ def find_ground(pts: np.ndarray, band_frac: float) -> tuple[np.ndarray, Ground |
 
 def _held_surface(pts: np.ndarray, body: np.ndarray, order: np.ndarray, first: np.ndarray, band_frac: float,
                   lo: float, hi: float) -> tuple[np.ndarray, Ground | None]:
-    """``find_ground``'s second try: ``_surface`` through the lowest ``held`` point of each column, the
-    scales taken from the held points of ``body`` (M, 3) (``order``, ``first``: its columns, lowest
-    first; ``lo``, ``hi``: its span), or no points and None when no outliers lie below them."""
+    """``find_ground``'s second try: ``_held_at`` with ``GROUND_HELD`` points held, then with each of
+    ``GROUND_HELD_MORE`` whose held points lie a column width or more higher than the last searched
+    (outliers so many that they hold each other: 7-20 % of them under scan 10's ground); none when even
+    the last of those reaches the cloud's floor (no outliers under it: a tree with no ground). ``body``
+    (M, 3): the points of ``pts`` within ``lo`` to ``hi``; ``order``, ``first``: its columns, lowest
+    first. No points and None when none finds a ground."""
     none = np.zeros(len(pts), bool), None
+    cell = GROUND_CELL * (hi - lo)
+    most = _held_span(body, order, first, band_frac, lo, hi, GROUND_HELD_MORE[-1])
+    if most is not None and most[0] - lo < cell:  # nothing strewn below the cloud: no other ground to find
+        return none
+    last = lo
+    for k in (GROUND_HELD, *GROUND_HELD_MORE):
+        span = _held_span(body, order, first, band_frac, lo, hi, k)
+        if span is None or span[0] - last < cell:  # nothing more set aside than the last search did
+            continue
+        found = _held_at(pts, span, band_frac, k)
+        if found[1] is not None:
+            return found
+        last = span[0]
+    return none
+
+
+def _held_span(body: np.ndarray, order: np.ndarray, first: np.ndarray, band_frac: float, lo: float, hi: float,
+               k: int) -> tuple[float, float] | None:
+    """``body_span`` of the points of ``body`` (M, 3) with ``k`` more of their column within half of
+    ``band_frac`` of its height (``lo`` to ``hi``) above them (``held``; ``order``, ``first``: its
+    columns, lowest first), or None when they hold fewer than 20 columns."""
+    order, first = held(body[:, 2], order, first, band_frac * (hi - lo) / 2, k)
+    return body_span(body[order, 2]) if first.sum() >= 20 else None  # the outliers' few held points aside
+
+
+def _held_at(pts: np.ndarray, span: tuple[float, float], band_frac: float, k: int) -> Found:
+    """``_surface`` through the lowest point of each column of ``pts`` (N, 3) within ``span`` (``lo``,
+    ``hi``: ``_held_span``'s) that has ``k`` more of its column just above it (``held``), only such
+    points counted below the ground (``_cut``: outliers strewn under it are no trunk under a crown's
+    underside); or no points and None."""
+    lo, hi = span
     h = hi - lo
-    order, first = held(body[:, 2], order, first, band_frac * h / 2)
-    if first.sum() < 20:
-        return none
-    lo_held, hi = body_span(body[order, 2])  # the outliers' few held points aside
-    if lo_held - lo < GROUND_CELL * h:  # nothing strewn below the cloud: no other ground to find
-        return none
-    lo, h = lo_held, hi - lo_held
     inside = (pts[:, 2] >= lo) & (pts[:, 2] <= hi)
     body = pts[inside]
     order, first = _columns_low_first(body[:, :2], body[:, 2], GROUND_CELL * h)
-    order, first = held(body[:, 2], order, first, band_frac * h / 2)
+    order, first = held(body[:, 2], order, first, band_frac * h / 2, k)
     if first.sum() < 20:
-        return none
-    found, _ = _surface(pts, body[order[first]], band_frac, inside, h)
-    return found if found[1] is not None else none
+        return np.zeros(len(pts), bool), None
+    counted = np.zeros(len(pts), bool)
+    counted[np.flatnonzero(inside)[order]] = True
+    found, _ = _surface(pts, body[order[first]], band_frac, inside, h, counted)
+    return found if found[1] is not None else (np.zeros(len(pts), bool), None)
 
 
 def _surface(pts: np.ndarray, low: np.ndarray, band_frac: float, inside: np.ndarray,
-             h: float) -> tuple[Found, Found | None]:
+             h: float, counted: np.ndarray | None = None) -> tuple[Found, Found | None]:
     """(N,) bool ground points of ``pts`` (N, 3) and the ``Ground`` through the column samples ``low``
-    (M, 3), or no points and None (``find_ground``; ``h``: the height the scales come from); and the
+    (M, 3), or no points and None (``find_ground``; ``h``: the height the scales come from; ``counted``:
+    (N,) bool, the points counted below a ground, all when None); and the
     first surface refused only for holding under ``GROUND_SHARE`` of the points, or None
     (``find_ground``'s last resort: found here once, not searched for again).
 
@@ -254,8 +290,8 @@ def _surface(pts: np.ndarray, low: np.ndarray, band_frac: float, inside: np.ndar
     ``GROUND_DIP`` of the height or more below it.
     """
     sparse = None
-    for ground, under in _candidates(pts, low, band_frac, h):
-        cut = _cut(pts, under, band_frac, inside)
+    for ground, under in _candidates(pts, low, band_frac, h, counted):
+        cut = _cut(pts, under, band_frac, inside, counted)
         if cut is None:
             continue
         if cut[1]:
@@ -265,7 +301,8 @@ def _surface(pts: np.ndarray, low: np.ndarray, band_frac: float, inside: np.ndar
     return (np.zeros(len(pts), bool), None), sparse
 
 
-def _candidates(pts: np.ndarray, low: np.ndarray, band_frac: float, h: float) -> Iterator[tuple[Ground, np.ndarray]]:
+def _candidates(pts: np.ndarray, low: np.ndarray, band_frac: float, h: float,
+                counted: np.ndarray | None = None) -> Iterator[tuple[Ground, np.ndarray]]:
     """``_surface``'s surfaces to try, in order, each with its heights under ``pts`` (N,): the better
     fitting of plane and curve, the other, then each following the dips of its columns."""
     tol = band_frac * h / 2
@@ -286,11 +323,19 @@ def _candidates(pts: np.ndarray, low: np.ndarray, band_frac: float, h: float) ->
         if ground is None:
             continue
         under = ground.height(pts[:, :2])
-        if (pts[:, 2] - under < -GROUND_DITCH * h).sum() > GROUND_BELOW * len(pts):
+        if _below(pts[:, 2] - under < -GROUND_DITCH * h, counted):
             continue  # deeper than any dip is followed: they would stay below it (quick)
         under = under + _dips(pts, under, GROUND_CELL * h, GROUND_DIP * h)
-        if (pts[:, 2] - under < -GROUND_DIP * h).sum() <= GROUND_BELOW * len(pts):
+        if not _below(pts[:, 2] - under < -GROUND_DIP * h, counted):
             yield ground, under
+
+
+def _below(under: np.ndarray, counted: np.ndarray | None) -> bool:
+    """Whether more than ``GROUND_BELOW`` of the points (of those ``counted``, (N,) bool, if given) lie
+    below a ground (``under``: (N,) bool, each point's)."""
+    if counted is None:
+        return bool(under.sum() > GROUND_BELOW * len(under))
+    return bool((under & counted).sum() > GROUND_BELOW * counted.sum())
 
 
 def _fits(low: np.ndarray, ground: Ground, tol: float) -> int:
@@ -344,8 +389,8 @@ def _linked(xy: np.ndarray, low: np.ndarray, cell: float, deep: float) -> np.nda
     return near & start[lab]
 
 
-def _cut(pts: np.ndarray, under: np.ndarray, band_frac: float,
-         inside: np.ndarray) -> tuple[np.ndarray, bool] | None:
+def _cut(pts: np.ndarray, under: np.ndarray, band_frac: float, inside: np.ndarray,
+         counted: np.ndarray | None = None) -> tuple[np.ndarray, bool] | None:
     """(N,) bool: the points of ``pts`` (N, 3) cut as ground over the ground heights ``under`` (N,), and
     whether it holds ``GROUND_SHARE`` of the points within ``band_frac`` / 2 of it; None when it is no
     ground (``find_ground``; ``inside``: the points that set the height).
@@ -374,7 +419,7 @@ def _cut(pts: np.ndarray, under: np.ndarray, band_frac: float,
     if wide < GROUND_WIDER * min(slices.values()):  # grass up to 9 % of the height: the trunk shows above it
         slices.update({k: spread(k) for k in range(18, 30)})
     trunk = min(slices.values())
-    if (up < -1.5 * step).sum() > GROUND_BELOW * len(pts) or not np.isfinite(trunk) or wide < GROUND_WIDER * trunk:
+    if _below(up < -1.5 * step, counted) or not np.isfinite(trunk) or wide < GROUND_WIDER * trunk:
         return None
     cut = next((k for k in range(3, 30) if (slices[k] if k in slices else spread(k)) < 2 * trunk), 3)
     ground = up < cut * step

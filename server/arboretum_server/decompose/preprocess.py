@@ -22,7 +22,7 @@ from arboretum_library.repeats import Repeats, distinct_rows
 from .columns import Column, trunk_columns
 from .ground import find_ground
 from .options import WORK_HEIGHT, DecomposeOptions
-from .strays import strays
+from .strays import SCATTER_SHARE, scattered, strays
 from .trunkbase import find_root
 
 PILE_APART = 0.25
@@ -98,7 +98,7 @@ def prepare(
     sub = pts[idx]
     _check_counts(len(sub), options)
     up = sub[:, 2] if surface is None else sub[:, 2] - surface.height(sub[:, :2])
-    root = find_root(sub, None if surface is None else up)
+    root = _rooted(sub, None if surface is None else up)
     cols = trunk_columns(sub, root, up)
     height = float(sub[:, 2].max() - root[2])
     scale = WORK_HEIGHT / height
@@ -110,6 +110,24 @@ def prepare(
         lab = (lab[idx] > 0).astype(np.uint8)
     return Prepared((sub - root) * scale, idx, lab, root, scale, int(ground.sum()), tuple(cols), repeats,
                     int(stray.sum()))
+
+
+def _rooted(sub: np.ndarray, up: np.ndarray | None) -> np.ndarray:
+    """``find_root``'s trunk base of ``sub`` (N, 3) (``up``: heights above the ground, or None); when it
+    is refused and ``SCATTER_SHARE`` of the points or more stand apart (``scattered``), the refusal names
+    them instead: outliers strewn round a tree make a base band no trunk holds, and "separate trunks"
+    or "crop the scan to one standing tree" sent the user after the wrong cause."""
+    try:
+        return find_root(sub, up)
+    except InputError as refusal:
+        share = scattered(sub)
+        if share < SCATTER_SHARE:
+            raise
+        raise InputError(
+            f"point cloud: {share:.0%} of the points stand scattered apart from the rest (outliers?) and no "
+            "single trunk base stands out among them; remove them from the file (an outlier filter) or crop "
+            "it to the tree"
+        ) from refusal
 
 
 class OptionError(InputError):

@@ -1,0 +1,97 @@
+"""Ground and trunk base (session 21, helper-143): many uniform outliers. With 10-20 % of them strewn in a
+box round scan 10 (a pine on a ground patch 2.5 m wide), the outliers held each other 3 deep down to the
+box's floor, ``held`` found nothing strewn below its points and the ground was missed: the floor was cut
+instead and the root went 4-24 % of the height under the ground (9-20 of 20 draws, exit 0). The held
+search now asks for 6, 12, then 24 points held (``GROUND_HELD_MORE``), and counts only held points below
+a ground (the outliers under it were 1.3-2.7 % of the points, over ``GROUND_BELOW``). A trunk base
+refused among many scattered points now names them, not "separate trunks" or "crop the scan"."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from arboretum_library.errors import InputError
+from arboretum_server.decompose.ground import find_ground
+from arboretum_server.decompose.options import DecomposeOptions
+from arboretum_server.decompose.preprocess import prepare
+from arboretum_server.decompose.strays import scattered
+
+SCANS = {path.name[:2]: path for path in (Path(__file__).resolve().parents[1] / "assets" / "scans").glob("*/*.xyz")}
+
+
+@pytest.fixture(scope="module")
+def scans():
+    return {}
+
+
+def _scan(cache, key):
+    if key not in cache:
+        pts = np.loadtxt(SCANS[key])[:, :3]
+        cache[key] = pts, _root(pts)
+    return cache[key]
+
+
+def _root(pts):
+    o = DecomposeOptions()
+    return prepare(pts, o, np.random.default_rng(o.seed)).root_scan
+
+
+def _strewn(pts, share, seed):
+    """``share`` of the points of ``pts`` strewn uniformly over a box 20 % wider than it each way."""
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = 0.2 * (hi - lo)
+    return np.random.default_rng(seed).uniform(lo - pad, hi + pad, (int(share * len(pts)), 3))
+
+
+def _pine():
+    """A tree 20 tall (a trunk 0.15 wide, a cone of crown from 4 up) on a ground patch 2.5 wide at z = 0:
+    3,000 ground points first, then 20,000 of the tree."""
+    rng = np.random.default_rng(100)
+    a, z = rng.uniform(0, 2 * np.pi, 5000), rng.uniform(0, 20, 5000)
+    trunk = np.c_[0.15 * np.cos(a), 0.15 * np.sin(a), z]
+    zc = rng.uniform(4, 20, 15000)
+    r, b = 1.2 * (20 - zc) / 16 * np.sqrt(rng.uniform(0, 1, len(zc))), rng.uniform(0, 2 * np.pi, len(zc))
+    ground = np.c_[rng.uniform(-1.25, 1.25, (3000, 2)), rng.normal(0, 0.02, 3000)]
+    return np.r_[ground, trunk, np.c_[r * np.cos(b), r * np.sin(b), zc]]
+
+
+@pytest.mark.parametrize("share, seed", [(0.1, 0), (0.1, 1), (0.15, 0), (0.2, 0)])
+def test_outliers_holding_each_other_leave_a_small_ground_found(share, seed):
+    # before: no ground, or the outliers' floor 3.8-4.0 under the ground (the tree 20 tall); now the
+    # ground within 0.1 of z = 0, all 3,000 of its points cut and under 0.5 % of the tree's
+    pts = _pine()
+    ground, surface = find_ground(np.r_[pts, _strewn(pts, share, seed)], 0.015)
+    assert surface is not None and abs(surface.height(np.zeros((1, 2)))[0]) < 0.11
+    assert ground[:3000].all() and ground[3000:len(pts)].sum() < 0.005 * (len(pts) - 3000)
+
+
+@pytest.mark.parametrize("share, seed", [(0.1, 1), (0.12, 2), (0.15, 2), (0.2, 0)])
+def test_many_outliers_leave_scan_10_rooted_on_its_ground(scans, share, seed):
+    # scan 10 with 10-20 % uniform outliers: root 19.6-24.6 % of the height under the clean scan's in
+    # these draws (the 15 % one with no ground cut at all); now within 0.6 % of it, the ground cut
+    pts, clean = _scan(scans, "10")
+    noise = _strewn(pts, share, seed)
+    o = DecomposeOptions()
+    prepared = prepare(np.r_[pts, noise], o, np.random.default_rng(o.seed))
+    assert prepared.ground_removed >= 2800 + 0.1 * len(noise)  # the clean scan's 2,821 and the outliers under it
+    assert np.linalg.norm(prepared.root_scan - clean) < 0.01 * np.ptp(pts[:, 2])
+
+
+def test_a_base_refused_among_scattered_points_names_them(scans):
+    # scan 06 (no ground) with 20 % uniform outliers, this draw: "no trunk base found (...); crop the scan
+    # to one standing tree" before, which sent the user after the wrong cause
+    pts, _ = _scan(scans, "06")
+    with pytest.raises(InputError, match=r"^point cloud: 1[0-9]% of the points stand scattered apart .*outlier filter"):
+        _root(np.r_[pts, _strewn(pts, 0.2, 2)])
+
+
+def test_scattered_counts_outliers_not_a_sparse_ground():
+    # uniform outliers: about their share; a sparse ground round the tree (its points as far apart as
+    # outliers') and a clean tree: 0, so their refusals keep their own words
+    pts = _pine()[3000:]
+    noise = _strewn(pts, 0.1, 0)
+    assert 0.05 < scattered(np.r_[pts, noise]) < 0.1  # some lie in the crown
+    xy = np.random.default_rng(0).uniform(-8, 8, (2000, 2))
+    assert scattered(np.r_[pts, np.c_[xy, np.zeros(2000)]]) == 0.0
+    assert scattered(pts) == 0.0
