@@ -115,8 +115,9 @@ def prepare(
 def _rooted(sub: np.ndarray, up: np.ndarray | None) -> np.ndarray:
     """``find_root``'s trunk base of ``sub`` (N, 3) (``up``: heights above the ground, or None); when it
     is refused and ``SCATTER_SHARE`` of the points or more stand apart (``scattered``), the refusal names
-    them instead: outliers strewn round a tree make a base band no trunk holds, and "separate trunks"
-    or "crop the scan to one standing tree" sent the user after the wrong cause."""
+    them too: outliers strewn round a tree make a base band no trunk holds, and "crop the scan to one
+    standing tree" alone sent the user after the wrong cause. The refusal's own words stay: with two
+    trees and outliers, "separate trunks" is still true (helper-146's review)."""
     try:
         return find_root(sub, up)
     except InputError as refusal:
@@ -124,9 +125,8 @@ def _rooted(sub: np.ndarray, up: np.ndarray | None) -> np.ndarray:
         if share < SCATTER_SHARE:
             raise
         raise InputError(
-            f"point cloud: {share:.0%} of the points stand scattered apart from the rest (outliers?) and no "
-            "single trunk base stands out among them; remove them from the file (an outlier filter) or crop "
-            "it to the tree"
+            f"{refusal}; {share:.0%} of the points stand scattered apart from the rest (outliers?), which may "
+            "be why: remove them from the file (an outlier filter)"
         ) from refusal
 
 

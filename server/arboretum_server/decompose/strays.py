@@ -45,8 +45,9 @@ SCATTER_SPAN = 0.3
 (uniform outliers: about half; a sparse ground round the tree: 0.0)."""
 SCATTER_SHARE = 0.03
 """A refused trunk base names the scattered points as the cause when at least this share of the points
-stands apart (``scattered``: the four real scans 0.0-0.5 %; with 5 and 10 % uniform outliers 4.5-5.0
-and 8.4-9.3 %)."""
+stands apart (``scattered``, on ``prepare``'s thinned points: the four real scans 0.0-0.5 %; with 5 and
+10 % uniform outliers 4.5-5.0 and 8.4-9.3 %; on the raw clouds 5.2-6.7 and 10.0 %, helper-146). The
+deeper held ground searches ask for it too (``ground._many_scattered``)."""
 
 
 def strays(pts: np.ndarray) -> np.ndarray:
