@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import fcntl
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -365,3 +366,28 @@ def las_file(path: Path, pts: np.ndarray, scale: float = 1e-4) -> Path:
     las.x, las.y, las.z = pts[:, 0], pts[:, 1], pts[:, 2]
     las.write(str(path))
     return path
+
+
+def strewn(pts: np.ndarray, share: float, seed: int) -> np.ndarray:
+    """``share`` of the points of ``pts`` (N, 3) strewn uniformly over a box 20 % wider than it each way."""
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = 0.2 * (hi - lo)
+    return np.random.default_rng(seed).uniform(lo - pad, hi + pad, (int(share * len(pts)), 3))
+
+
+def prepared_root(pts: np.ndarray) -> np.ndarray:
+    """``prepare``'s trunk base of ``pts`` (N, 3) with the default options, in the scan's frame."""
+    from arboretum_server.decompose.options import DecomposeOptions
+    from arboretum_server.decompose.preprocess import prepare
+
+    o = DecomposeOptions()
+    return prepare(pts, o, np.random.default_rng(o.seed)).root_scan
+
+
+@functools.cache
+def real_scan(key: str) -> tuple[np.ndarray, np.ndarray]:
+    """(points (N, 3), ``prepared_root``) of the bundled real scan whose file name starts with ``key``
+    ('01', '06', '07', '10'); cached: do not change the arrays."""
+    scans = Path(__file__).resolve().parents[1] / "assets" / "scans"
+    pts = np.loadtxt(next(scans.glob(f"*/{key}*.xyz")))[:, :3]
+    return pts, prepared_root(pts)

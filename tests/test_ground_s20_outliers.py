@@ -6,42 +6,14 @@ a small ground) 5 % of them held columns under the ground in ``held``'s sampling
 missed and the root went 14-24 % of the height under it in 8 of 10 draws. And ``find_ground``'s last
 resort, the outliers' sparse floor, is the first search's, not searched for a second time."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import arboretum_server.decompose.ground as ground_module
 from arboretum_server.decompose.ground import find_ground
-from arboretum_server.decompose.options import DecomposeOptions
-from arboretum_server.decompose.preprocess import prepare
 from arboretum_server.decompose.trunkbase import find_root
-
-SCANS = {path.name[:2]: path for path in (Path(__file__).resolve().parents[1] / "assets" / "scans").glob("*/*.xyz")}
-
-
-@pytest.fixture(scope="module")
-def scans():
-    return {}
-
-
-def _scan(cache, key):
-    if key not in cache:
-        pts = np.loadtxt(SCANS[key])[:, :3]
-        cache[key] = pts, _root(pts)
-    return cache[key]
-
-
-def _root(pts):
-    o = DecomposeOptions()
-    return prepare(pts, o, np.random.default_rng(o.seed)).root_scan
-
-
-def _strewn(pts, share, seed):
-    """``share`` of the points of ``pts`` strewn uniformly over a box 20 % wider than it each way."""
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
-    pad = 0.2 * (hi - lo)
-    return np.random.default_rng(seed).uniform(lo - pad, hi + pad, (int(share * len(pts)), 3))
+from factories import prepared_root, real_scan, strewn
 
 
 def test_lone_points_under_a_column_are_not_its_base():
@@ -58,35 +30,35 @@ def test_lone_points_under_a_column_are_not_its_base():
 
 @pytest.mark.parametrize("key, share, seed", [("07", 0.01, 0), ("07", 0.01, 1), ("07", 0.015, 2), ("07", 0.02, 1),
                                               ("01", 0.015, 0), ("01", 0.03, 0)])
-def test_outliers_under_a_tree_with_no_ground_leave_its_root(scans, key, share, seed):
+def test_outliers_under_a_tree_with_no_ground_leave_itsprepared_root(key, share, seed):
     # scan 07 (buttress roots) and scan 01 (a coffee tree), no ground: 12-22 % of the height too low,
     # or "no trunk base" (scan 01 with 1.5 % and more), before; 0.01-0.24 % now
-    pts, clean = _scan(scans, key)
+    pts, clean = real_scan(key)
     h = float(np.ptp(pts[:, 2]))
-    root = _root(np.r_[pts, _strewn(pts, share, seed)])
+    root = prepared_root(np.r_[pts, strewn(pts, share, seed)])
     assert np.linalg.norm(root - clean) < 0.01 * h
 
 
 @pytest.mark.parametrize("seed", [0, 2, 3, 9])
-def test_five_percent_outliers_leave_a_small_ground_found(scans, seed):
+def test_five_percent_outliers_leave_a_small_ground_found(seed):
     # scan 10 and 5 % uniform outliers: the ground missed (or only the outliers' floor cut) and the root
     # 14-24 % of the height under it in these draws; now cut, the root within 0.1 % of the clean scan's
-    pts, clean = _scan(scans, "10")
-    noise = _strewn(pts, 0.05, seed)
+    pts, clean = real_scan("10")
+    noise = strewn(pts, 0.05, seed)
     ground, surface = find_ground(np.r_[pts, noise], 0.015)
     assert surface is not None and ground[:len(pts)].sum() >= 2400  # 2,569 without the noise
-    root = _root(np.r_[pts, noise])
+    root = prepared_root(np.r_[pts, noise])
     assert np.linalg.norm(root - clean) < 0.01 * np.ptp(pts[:, 2])
 
 
-def test_the_last_resort_reuses_the_first_search(scans, monkeypatch):
+def test_the_last_resort_reuses_the_first_search(monkeypatch):
     # scan 07 with 2 % outliers takes the outliers' sparse floor: the first search's surfaces are fitted
     # once (plane: first search and held pass; before, a third time for the last resort)
-    pts, _ = _scan(scans, "07")
+    pts, _ = real_scan("07")
     calls = []
     plane = ground_module.ground_plane
     monkeypatch.setattr(ground_module, "ground_plane", lambda *a: calls.append(1) or plane(*a))
-    ground, surface = find_ground(np.r_[pts, _strewn(pts, 0.02, 0)], 0.015)
+    ground, surface = find_ground(np.r_[pts, strewn(pts, 0.02, 0)], 0.015)
     assert surface is not None and ground[:len(pts)].sum() == 0
     assert len(calls) == 2
 

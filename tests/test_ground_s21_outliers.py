@@ -8,7 +8,6 @@ of the points or more stand scattered: helper-146's review found the deeper sear
 branch layer as the ground of a tree with none. A trunk base refused among many scattered points names
 them after its own words."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,32 +17,7 @@ from arboretum_server.decompose.ground import find_ground
 from arboretum_server.decompose.options import DecomposeOptions
 from arboretum_server.decompose.preprocess import prepare
 from arboretum_server.decompose.strays import scattered
-
-SCANS = {path.name[:2]: path for path in (Path(__file__).resolve().parents[1] / "assets" / "scans").glob("*/*.xyz")}
-
-
-@pytest.fixture(scope="module")
-def scans():
-    return {}
-
-
-def _scan(cache, key):
-    if key not in cache:
-        pts = np.loadtxt(SCANS[key])[:, :3]
-        cache[key] = pts, _root(pts)
-    return cache[key]
-
-
-def _root(pts):
-    o = DecomposeOptions()
-    return prepare(pts, o, np.random.default_rng(o.seed)).root_scan
-
-
-def _strewn(pts, share, seed):
-    """``share`` of the points of ``pts`` strewn uniformly over a box 20 % wider than it each way."""
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
-    pad = 0.2 * (hi - lo)
-    return np.random.default_rng(seed).uniform(lo - pad, hi + pad, (int(share * len(pts)), 3))
+from factories import prepared_root, real_scan, strewn
 
 
 def _pine():
@@ -63,37 +37,37 @@ def test_outliers_holding_each_other_leave_a_small_ground_found(share, seed):
     # before: no ground, or the outliers' floor 3.8-4.0 under the ground (the tree 20 tall); now the
     # ground within 0.1 of z = 0, all 3,000 of its points cut and under 0.5 % of the tree's
     pts = _pine()
-    ground, surface = find_ground(np.r_[pts, _strewn(pts, share, seed)], 0.015)
+    ground, surface = find_ground(np.r_[pts, strewn(pts, share, seed)], 0.015)
     assert surface is not None and abs(surface.height(np.zeros((1, 2)))[0]) < 0.11
     assert ground[:3000].all() and ground[3000:len(pts)].sum() < 0.005 * (len(pts) - 3000)
 
 
 @pytest.mark.parametrize("share, seed", [(0.1, 1), (0.12, 2), (0.15, 2), (0.2, 0)])
-def test_many_outliers_leave_scan_10_rooted_on_its_ground(scans, share, seed):
+def test_many_outliers_leave_scan_10_rooted_on_its_ground(share, seed):
     # scan 10 with 10-20 % uniform outliers: root 19.6-24.6 % of the height under the clean scan's in
     # these draws (the 15 % one with no ground cut at all); now within 0.6 % of it, the ground cut
-    pts, clean = _scan(scans, "10")
-    noise = _strewn(pts, share, seed)
+    pts, clean = real_scan("10")
+    noise = strewn(pts, share, seed)
     o = DecomposeOptions()
     prepared = prepare(np.r_[pts, noise], o, np.random.default_rng(o.seed))
     assert prepared.ground_removed >= 2800 + 0.1 * len(noise)  # the clean scan's 2,821 and the outliers under it
     assert np.linalg.norm(prepared.root_scan - clean) < 0.01 * np.ptp(pts[:, 2])
 
 
-def test_a_base_refused_among_scattered_points_names_them(scans):
+def test_a_base_refused_among_scattered_points_names_them():
     # scan 06 (no ground) with 20 % uniform outliers, this draw: "no trunk base found (...); crop the scan
     # to one standing tree" before, which sent the user after the wrong cause
-    pts, _ = _scan(scans, "06")
+    pts, _ = real_scan("06")
     with pytest.raises(InputError, match=r"^point cloud: no trunk base found .*; 1[0-9]% of the points stand "
                        r"scattered apart .*outlier filter"):
-        _root(np.r_[pts, _strewn(pts, 0.2, 2)])
+        prepared_root(np.r_[pts, strewn(pts, 0.2, 2)])
 
 
 def test_scattered_counts_outliers_not_a_sparse_ground():
     # uniform outliers: about their share; a sparse ground round the tree (its points as far apart as
     # outliers') and a clean tree: 0, so their refusals keep their own words
     pts = _pine()[3000:]
-    noise = _strewn(pts, 0.1, 0)
+    noise = strewn(pts, 0.1, 0)
     assert 0.05 < scattered(np.r_[pts, noise]) < 0.1  # some lie in the crown
     xy = np.random.default_rng(0).uniform(-8, 8, (2000, 2))
     assert scattered(np.r_[pts, np.c_[xy, np.zeros(2000)]]) == 0.0
@@ -128,4 +102,4 @@ def test_two_trees_among_outliers_are_still_called_two_trees():
     pine = _pine()
     two = np.r_[pine, pine * [1, 1, 0.9] + [3.0, 0.0, 0.0]]
     with pytest.raises(InputError, match=r"separate trunks found .*; [0-9]+% of the points stand scattered apart"):
-        _root(np.r_[two, _strewn(two, 0.05, 4)])
+        prepared_root(np.r_[two, strewn(two, 0.05, 4)])
