@@ -38,7 +38,8 @@ def vertex_limits(segments: list[np.ndarray], tree: cKDTree | None) -> float | n
     if tree is None or not segments:
         return LIMIT
     d = tree.query(np.concatenate(segments), k=8)[0]
-    return np.clip(LOCAL_SPACINGS * np.median(d, axis=1), LIMIT_MIN, LIMIT)
+    median = 0.5 * (d[:, 3] + d[:, 4])  # np.median of the 8 sorted distances, bit for bit, without its sort
+    return np.clip(LOCAL_SPACINGS * median, LIMIT_MIN, LIMIT)
 
 
 def smooth_polylines(segments: list[np.ndarray], limit: float | np.ndarray = LIMIT, iterations: int = ITERATIONS,
