@@ -368,10 +368,11 @@ def las_file(path: Path, pts: np.ndarray, scale: float = 1e-4) -> Path:
     return path
 
 
-def strewn(pts: np.ndarray, share: float, seed: int) -> np.ndarray:
-    """``share`` of the points of ``pts`` (N, 3) strewn uniformly over a box 20 % wider than it each way."""
+def strewn(pts: np.ndarray, share: float, seed: int, wider: float = 0.2) -> np.ndarray:
+    """``share`` of the points of ``pts`` (N, 3) strewn uniformly over a box ``wider`` (a fraction) than
+    it each way."""
     lo, hi = pts.min(axis=0), pts.max(axis=0)
-    pad = 0.2 * (hi - lo)
+    pad = wider * (hi - lo)
     return np.random.default_rng(seed).uniform(lo - pad, hi + pad, (int(share * len(pts)), 3))
 
 

@@ -30,7 +30,7 @@ def test_lone_points_under_a_column_are_not_its_base():
 
 @pytest.mark.parametrize("key, share, seed", [("07", 0.01, 0), ("07", 0.01, 1), ("07", 0.015, 2), ("07", 0.02, 1),
                                               ("01", 0.015, 0), ("01", 0.03, 0)])
-def test_outliers_under_a_tree_with_no_ground_leave_itsprepared_root(key, share, seed):
+def test_outliers_under_a_tree_with_no_ground_leave_its_root(key, share, seed):
     # scan 07 (buttress roots) and scan 01 (a coffee tree), no ground: 12-22 % of the height too low,
     # or "no trunk base" (scan 01 with 1.5 % and more), before; 0.01-0.24 % now
     pts, clean = real_scan(key)

@@ -45,7 +45,8 @@ GROUND_HELD_MORE = (6, 12, 24)
 down to their box's floor under scan 10's ground, which was missed in 9-20 of 20 draws (the root 4-24 %
 of the height under it)."""
 SCATTER_SAMPLE = 5_000
-"""``_many_scattered`` reads the share of scattered points on at most this many of them."""
+"""``_many_scattered`` reads the share of scattered points on at most this many of them (their
+neighbours found among all the points)."""
 GROUND_DITCH = 0.1
 """``_dips`` follows a column deeper than ``GROUND_DIP`` down to this fraction of the height below the
 ground when a chain of columns, each at most ``GROUND_WALL`` deeper than the last, leads to it from a
@@ -252,16 +253,14 @@ def _held_surface(pts: np.ndarray, body: np.ndarray, order: np.ndarray, first: n
 
 
 def _many_scattered(pts: np.ndarray) -> bool:
-    """Whether ``SCATTER_SHARE`` of ``pts`` (N, 3) or more stand apart (``strays.scattered``, on a fixed
-    sample of ``SCATTER_SAMPLE``): the deeper held searches (``GROUND_HELD_MORE``) are for outliers so
+    """Whether ``SCATTER_SHARE`` of ``pts`` (N, 3) or more stand apart (``strays.scattered``, read on a
+    fixed sample of ``SCATTER_SAMPLE`` of them, their neighbours among all): the deeper held searches (``GROUND_HELD_MORE``) are for outliers so
     many that they hold each other. Without this a tree with no ground, dense flat branch layers and a
     sparsely seen trunk under them had a layer cut as its ground (helper-146's review: 24 of 48 such
     clouds, the root 21-50 % of the height up the trunk; 0 before)."""
     from .strays import SCATTER_SHARE, scattered
 
-    if len(pts) > SCATTER_SAMPLE:
-        pts = pts[np.random.default_rng(0).choice(len(pts), SCATTER_SAMPLE, replace=False)]
-    return scattered(pts) >= SCATTER_SHARE
+    return scattered(pts, SCATTER_SAMPLE) >= SCATTER_SHARE
 
 
 def _held_span(body: np.ndarray, order: np.ndarray, first: np.ndarray, band_frac: float, lo: float, hi: float,

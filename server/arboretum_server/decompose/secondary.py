@@ -174,7 +174,9 @@ routing rounds) built one of the same 12,000 points again (2-4 ms)."""
 
 
 def cloud_tree(pts: np.ndarray) -> cKDTree:
-    """``cKDTree(pts)``, built once per ``pts`` array (the same tree, so the same answers, as a new one)."""
+    """``cKDTree(pts)``, built once per ``pts`` array (the same tree, so the same answers, as a new one).
+    The decomposition's and the refinements' points are never changed in place; an array that was would
+    get its old tree back."""
     hit = _TREES.get(pts)
     return hit if hit is not None else _TREES.put(pts, cKDTree(pts))
 
