@@ -270,14 +270,16 @@ def test_a_full_job_queue_answers_busy(tmp_path):
         s.setsockopt(zmq.RCVTIMEO, 20000)
         for i in range(3):
             s.send_multipart(P.to_frames(P.ExportMesh(session="s", seed=1), 100 + i))
-        rid, reply = P.parse(s.recv_multipart())  # the third cannot even queue
-        assert (rid, reply.code) == (102, "busy")
-        got = []
-        while len(got) < 2:  # the queued one runs after the first: both finish, with progress between
+        got, busy = [], []
+        while len(got) < 2 or not busy:  # the queued one runs after the first: both finish, with progress between
             rid, msg = P.parse(s.recv_multipart())
-            if not isinstance(msg, P.Progress):
-                assert isinstance(msg, P.ExportFile)
+            if isinstance(msg, P.Progress):  # the first job's may come before the third's refusal (CI, loaded)
+                continue
+            if isinstance(msg, P.ExportFile):
                 got.append(rid)
+            else:
+                busy.append((rid, msg.code))
+        assert busy == [(102, "busy")]  # the third cannot even queue
         assert got == [100, 101]
         s.close(0)
     finally:
