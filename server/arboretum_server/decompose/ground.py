@@ -243,8 +243,10 @@ def _held_surface(pts: np.ndarray, body: np.ndarray, order: np.ndarray, first: n
         span = most if k == GROUND_HELD_MORE[-1] else _held_span(body, order, first, band_frac, lo, hi, k)
         if span is None or span[0] - last < cell:  # nothing more set aside than the last search did
             continue
-        if k != GROUND_HELD and not (scattered := _many_scattered(pts) if scattered is None else scattered):
-            break  # a sparse trunk foot under dense branch layers, not outliers holding each other
+        if k != GROUND_HELD:
+            scattered = _many_scattered(pts) if scattered is None else scattered
+            if not scattered:
+                break  # a sparse trunk foot under dense branch layers, not outliers holding each other
         found = _held_at(pts, span, band_frac, k)
         if found[1] is not None:
             return found
@@ -254,8 +256,8 @@ def _held_surface(pts: np.ndarray, body: np.ndarray, order: np.ndarray, first: n
 
 def _many_scattered(pts: np.ndarray) -> bool:
     """Whether ``SCATTER_SHARE`` of ``pts`` (N, 3) or more stand apart (``strays.scattered``, read on a
-    fixed sample of ``SCATTER_SAMPLE`` of them, their neighbours among all): the deeper held searches (``GROUND_HELD_MORE``) are for outliers so
-    many that they hold each other. Without this a tree with no ground, dense flat branch layers and a
+    fixed sample of ``SCATTER_SAMPLE`` of them, their neighbours among all): the deeper held searches
+    (``GROUND_HELD_MORE``) are for outliers so many that they hold each other. Without this a tree with no ground, dense flat branch layers and a
     sparsely seen trunk under them had a layer cut as its ground (helper-146's review: 24 of 48 such
     clouds, the root 21-50 % of the height up the trunk; 0 before)."""
     from .strays import SCATTER_SHARE, scattered
