@@ -61,7 +61,8 @@ def test_the_wall_was_ground_to_one_axis_only(scan06):
 
 def test_a_tree_on_ground_keeps_its_bonus(scan06):
     """Ground under a tree seen from the side is no wall: scan 06 on a ground disc (Z up) keeps its
-    bonus and is read Z up as surely as before (0.99)."""
+    bonus and is read Z up as surely as before (0.99). A guard: it passed before session 21 too, and
+    fails if the wall search takes the bonus from real ground."""
     rng = np.random.default_rng(1)
     h = float(np.ptp(scan06[:, 2]))
     n = 12000
