@@ -98,7 +98,7 @@ def prepare(
     sub = pts[idx]
     _check_counts(len(sub), options)
     up = sub[:, 2] if surface is None else sub[:, 2] - surface.height(sub[:, :2])
-    root = _rooted(sub, None if surface is None else up)
+    root = _rooted(sub, None if surface is None else up, _cut_top(pts[keep][ground], surface))
     cols = trunk_columns(sub, root, up)
     height = float(sub[:, 2].max() - root[2])
     scale = WORK_HEIGHT / height
@@ -112,14 +112,23 @@ def prepare(
                     int(stray.sum()))
 
 
-def _rooted(sub: np.ndarray, up: np.ndarray | None) -> np.ndarray:
-    """``find_root``'s trunk base of ``sub`` (N, 3) (``up``: heights above the ground, or None); when it
+def _cut_top(cut: np.ndarray, surface) -> float | None:
+    """The height above ``surface`` (a ``ground.Ground`` or None) of the highest of the points ``cut``
+    (M, 3) removed as ground: ``find_root`` looks for trunks whose feet went with it. None without."""
+    if surface is None or not len(cut):
+        return None
+    return float((cut[:, 2] - surface.height(cut[:, :2])).max())
+
+
+def _rooted(sub: np.ndarray, up: np.ndarray | None, cut: float | None = None) -> np.ndarray:
+    """``find_root``'s trunk base of ``sub`` (N, 3) (``up``: heights above the ground, or None; ``cut``:
+    the ground cut's top, ``_cut_top``); when it
     is refused and ``SCATTER_SHARE`` of the points or more stand apart (``scattered``), the refusal names
     them too: outliers strewn round a tree make a base band no trunk holds, and "crop the scan to one
     standing tree" alone sent the user after the wrong cause. The refusal's own words stay: with two
     trees and outliers, "separate trunks" is still true (helper-146's review)."""
     try:
-        return find_root(sub, up)
+        return find_root(sub, up, cut)
     except InputError as refusal:
         share = scattered(sub)
         if share < SCATTER_SHARE:

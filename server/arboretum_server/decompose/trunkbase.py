@@ -3,8 +3,9 @@
 ``find_root`` clusters the lowest ``BASE_BAND`` of the height and puts the root on the largest
 cluster that is a trunk. Clusters that hang from the crown (a weeping branch's leaves: ``STANDING``,
 ``_no_column``) or lie on the ground (a crown bent down to it: ``_trunks_under_fallen_crown``) are
-no trunks; separate trunks are refused. A second tree standing higher than the band is
-``columns.trunk_columns``' job.
+no trunks; separate trunks are refused, in the band and, when the ground cut reaches over it, just
+above the cut (``_above_cut``: another tree's foot cut with the ground). A second tree standing higher
+than the band is ``columns.trunk_columns``' job.
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ def plan_radius(q: np.ndarray, percent: float) -> float:
     return float(np.percentile(np.linalg.norm(q[:, :2] - np.median(q[:, :2], axis=0), axis=1), percent))
 
 
-def find_root(pts: np.ndarray, up: np.ndarray | None = None) -> np.ndarray:
+def find_root(pts: np.ndarray, up: np.ndarray | None = None, cut: float | None = None) -> np.ndarray:
     """(3,) trunk base of ``pts`` (N, 3): centre of the largest cluster in the lowest band, at its lowest z.
 
     The band is the lowest ``BASE_BAND`` of the height, measured in ``up`` (N,), each point's height
@@ -56,14 +57,24 @@ def find_root(pts: np.ndarray, up: np.ndarray | None = None) -> np.ndarray:
     InputError when the band holds several well-separated trunks (clusters hanging from the crown aside:
     ``STANDING``, ``_no_column``), or when its largest cluster spreads too wide to be one trunk base.
     A second tree standing higher than the band is not refused here: see ``columns.trunk_columns``.
+    ``cut``: the height in ``up`` up to which the ground was cut away (``ground.find_ground``), or None.
+    When the band starts lower, the several-trees check is made on a band from there too (``_above_cut``):
+    the ground cut keeps only the trunk of the narrowest slice, so another tree's foot went with the
+    ground and stood above the band (two pines among 2-15 % uniform outliers, cut 0.45-3.6 m high on
+    20 m: taken as one tree in 23 of 40 clouds, helper-146; 6 now, their ground tilted or found on the
+    outliers' floor). Only to refuse: the root stays.
     """
     z = pts[:, 2]
     h = np.ptp(z)
     up = z if up is None else up
-    base, lab, big = _band(pts, up, h, float(up.min()))
-    if not len(big) and (start := _dense_start(pts, up, h)) > up.min() + BASE_BAND * h:  # lone points under it
-        base, lab, big = _band(pts, up, h, start)
-    trunk = base[lab == big[0]] if len(big) else base
+    start = float(up.min())
+    band, lab, big = _band(pts, up, h, start)
+    if not len(big) and (dense := _dense_start(pts, up, h)) > start + BASE_BAND * h:  # lone points under it
+        start = dense
+        band, lab, big = _band(pts, up, h, start)
+    if cut is not None and cut > start:
+        _above_cut(pts, up, h, cut)
+    trunk = pts[band[lab == big[0]]] if len(big) else pts[band]
     centre = np.median(trunk[:, :2], axis=0)
     r90 = plan_radius(trunk, 90)
     if r90 > MAX_BASE_SPREAD * h:
@@ -74,17 +85,34 @@ def find_root(pts: np.ndarray, up: np.ndarray | None = None) -> np.ndarray:
     return np.array([centre[0], centre[1], trunk[:, 2].min()])
 
 
-def _band(pts: np.ndarray, up: np.ndarray, h: float, start: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(base band of ``pts`` (N, 3), its cluster labels, its big clusters: ``_base_clusters``): the
-    points from ``start`` up ``BASE_BAND`` of the height ``h`` in ``up`` (N,), at least the
-    ``BASE_MIN`` lowest from ``start``."""
+def _band(pts: np.ndarray, up: np.ndarray, h: float, start: float,
+          columns: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(indices of the base band's points in ``pts`` (N, 3), their cluster labels, the big clusters:
+    ``_base_clusters``, with ``columns``): the points from ``start`` up ``BASE_BAND`` of the height
+    ``h`` in ``up`` (N,), at least the ``BASE_MIN`` lowest from ``start``."""
     above = up >= start
     band = np.flatnonzero(above & (up < start + BASE_BAND * h))
     if len(band) < BASE_MIN:
         band = np.flatnonzero(above)[np.argsort(up[above])[:BASE_MIN]]
-    base = pts[band]
-    lab, big = _base_clusters(np.c_[base[:, :2], up[band]], h, np.c_[pts[:, :2], up])
-    return base, lab, big
+    lab, big = _base_clusters(np.c_[pts[band, :2], up[band]], h, np.c_[pts[:, :2], up], columns)
+    return band, lab, big
+
+
+def _above_cut(pts: np.ndarray, up: np.ndarray, h: float, cut: float) -> None:
+    """``find_root``'s several-trees check (``_band``: InputError) on the band from ``cut``, the top of the
+    ground cut in ``up`` (N,), over ``pts`` (N, 3); when that band's largest cluster is a flat patch
+    (``_flat``: ground left above the cut, the ground found lying under the real one, on the floor of
+    outliers), once more on the band from ``LINK`` of the height ``h`` above the patch (its 90th
+    percentile), where the trunks standing on it rise apart (two pines 3 apart among 10-15 %
+    outliers: their patches joined into one cluster). Only clusters a trunk column rises from count
+    there (``columns``): the top of a boulder by the trunk, left over the cut, stood 0.8 of the height
+    apart from it on the toy tree."""
+    band, lab, big = _band(pts, up, h, cut, columns=True)
+    if not len(big):
+        return
+    patch = np.c_[pts[band, :2], up[band]][lab == big[0]]
+    if _flat(patch, h):
+        _band(pts, up, h, float(np.percentile(patch[:, 2], 90)) + LINK * h, columns=True)
 
 
 def _dense_start(pts: np.ndarray, up: np.ndarray, h: float) -> float:
@@ -124,11 +152,13 @@ def _dense_enough(tree, q: np.ndarray, radius: float) -> bool:
     return typical >= BASE_NEIGHBOURS / SPARSE_SHARE
 
 
-def _base_clusters(base: np.ndarray, h: float, cloud: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _base_clusters(base: np.ndarray, h: float, cloud: np.ndarray,
+                   columns: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Cluster labels of the base band (links shorter than 2 % of height) and the big clusters that do
     not hang from the crown (``STANDING``; ``_no_column`` for all but the lowest; ``cloud`` (N, 3): the
-    whole cloud), largest first. InputError when two of those lie more than 10 % of the height apart (several
-    trees). ``base`` and ``cloud`` hold x, y and the height above the ground."""
+    whole cloud), largest first; with ``columns``, only those a trunk column rises from (``_trunk``).
+    InputError when two of those lie more than 10 % of the height apart (several trees). ``base`` and
+    ``cloud`` hold x, y and the height above the ground."""
     lab = _link(base, LINK * h)
     sizes = np.bincount(lab)
     big = np.flatnonzero(sizes >= max(10, 0.1 * len(base)))
@@ -144,6 +174,8 @@ def _base_clusters(base: np.ndarray, h: float, cloud: np.ndarray) -> tuple[np.nd
         column[np.argmin(low)] = False  # the lowest never hangs this way (an occluded trunk beside a bush
         hanging |= column  # is gappy and wide; weeping leaves may outnumber a thin trunk in the band)
         big = big[~hanging]
+    if columns and len(big) >= 2:
+        big = big[np.array([_trunk(core, ring) for core, ring in _columns(cloud, [base[lab == c] for c in big], h)])]
     if len(big) >= 2:
         cents = np.array([np.median(base[lab == c], axis=0) for c in big])
         sep = np.linalg.norm(cents[:, None, :2] - cents[None, :, :2], axis=2).max()
@@ -201,7 +233,7 @@ def _trunks_under_fallen_crown(base: np.ndarray, lab: np.ndarray, big: np.ndarra
     ``MIN_SLAB``) and narrow (``columns.NARROW``). A weeping crown's leaves can outnumber a thin trunk
     in the band, and the root then went to them (the guiding elm bent down 90 %: 0.49 of the height
     from its trunk)."""
-    from .columns import MIN_SLAB, NARROW
+    from .columns import MIN_SLAB
 
     sizes = np.bincount(lab)
     cands = np.flatnonzero(sizes >= BASE_MIN)
@@ -209,8 +241,7 @@ def _trunks_under_fallen_crown(base: np.ndarray, lab: np.ndarray, big: np.ndarra
         return None
     cands = cands[np.argsort(-sizes[cands], kind="stable")]
     cols = _columns(cloud, [base[lab == c] for c in cands], h)
-    trunk = np.array([core.min() >= max(GAPPY * core.max(), MIN_SLAB) and core.sum() >= NARROW * (core.sum() + ring.sum())
-                      for core, ring in cols], bool)
+    trunk = np.array([_trunk(core, ring) for core, ring in cols], bool)
     mat = np.array([core.min() >= MIN_SLAB and np.ptp(base[lab == c, 2]) < 0.5 * plan_radius(base[lab == c], 90)
                     for c, (core, _) in zip(cands, cols)], bool)
     first = np.flatnonzero(cands == big[0])[0] if len(big) else None
@@ -220,6 +251,15 @@ def _trunks_under_fallen_crown(base: np.ndarray, lab: np.ndarray, big: np.ndarra
     if not trunk.any() or not mat[others].all():
         return None
     return cands[trunk]
+
+
+def _trunk(core: np.ndarray, ring: np.ndarray) -> bool:
+    """Whether a column (``columns.column``'s points per slab within its radius, ``core``, and round it,
+    ``ring``) is a trunk's: full (no slab under ``GAPPY`` of the fullest nor under ``columns.MIN_SLAB``)
+    and narrow (``columns.NARROW``)."""
+    from .columns import MIN_SLAB, NARROW
+
+    return bool(core.min() >= max(GAPPY * core.max(), MIN_SLAB) and core.sum() >= NARROW * (core.sum() + ring.sum()))
 
 
 def _columns(cloud: np.ndarray, clusters: list[np.ndarray], h: float) -> list[tuple[np.ndarray, np.ndarray]]:
