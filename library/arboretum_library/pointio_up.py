@@ -354,10 +354,11 @@ def ground_band(pts: np.ndarray, axis: int) -> np.ndarray | None:
     ``GROUND_SHARE`` of the columns are ground, the band left out is the points less than
     ``GROUND_BAND`` of the extent above their column's lowest point (the surface's, for a column whose
     lowest point is far above it), and up to the first 1 % slice above that is half as wide as the band
-    (a trunk rising through grass). Session 18: one plane found by RANSAC missed ground that curved by 4 %
-    of the height, and the tree was turned on its side. Session 20: multipath under the ground became the
-    lowest point of too many columns and hid it (a tree turned Y up at 0.91); it is left out first
-    (``GROUND_PASSES``) and lies in the band.
+    (a trunk rising through grass). In a column across a terrace's edge, the upper level's band is left
+    out too (``_steps``, ``_upper_level``; session 22). Session 18: one plane found by RANSAC missed
+    ground that curved by 4 % of the height, and the tree was turned on its side. Session 20: multipath
+    under the ground became the lowest point of too many columns and hid it (a tree turned Y up at
+    0.91); it is left out first (``GROUND_PASSES``) and lies in the band.
     """
     h = pts[:, axis]
     lo, hi = np.percentile(h, [0.5, 99.5])
@@ -375,7 +376,26 @@ def ground_band(pts: np.ndarray, axis: int) -> np.ndarray | None:
     with np.errstate(invalid="ignore"):
         base = np.where(np.isfinite(surface) & ~(np.abs(low - surface) < 0.1 * height), surface, low)
     up = h - base.ravel()[column]
-    return up < _grass_top(up, across, height)
+    top = _grass_top(up, across, height)
+    band = up < top
+    for rise in _steps(low, surface, base, height):  # the upper level in a column across a terrace's edge
+        band |= _upper_level(up, column, rise.ravel(), height)
+    return band
+
+
+def _upper_level(up: np.ndarray, column: np.ndarray, rise: np.ndarray, height: float) -> np.ndarray:
+    """(N,) bool: the points of a column across a terrace's edge (``rise``: per column, 0 for none; ``up``:
+    each point's height over its column's ground) within ``GROUND_BAND`` over the upper level, in columns
+    whose next band up holds under a tenth as many points: nothing stands on the level there. A trunk on
+    the edge does, and keeps its foot (taken, scan 06's band held 458 of its points instead of 159, and
+    the guiding default tree's trunk slice moved up into its crown: Z at 0.70 became Y at 0.81)."""
+    r = rise[column]
+    band = GROUND_BAND * height
+    level = (r > 0) & (up >= r - GROUND_TOL * height) & (up < r + band)
+    above = (r > 0) & (up >= r + band) & (up < r + 2.0 * band)
+    count = len(rise)
+    free = 10 * np.bincount(column[above], minlength=count) < np.bincount(column[level], minlength=count)
+    return level & free[column]
 
 
 def _columns(across: np.ndarray, cell: float) -> tuple[np.ndarray, tuple[int, int]]:
@@ -433,6 +453,44 @@ def _median3(grid: np.ndarray) -> np.ndarray:
     n = np.isfinite(stack).sum(axis=2, keepdims=True)  # NaN sorts last
     half = np.take_along_axis(stack, np.maximum(n - 1, 0) // 2, 2) + np.take_along_axis(stack, n // 2 - (n == 0), 2)
     return np.where(n > 0, 0.5 * half, np.nan)[:, :, 0]
+
+
+GROUND_STEP, STEP_COLUMNS, STEP_ON = 0.15, 20, 0.95
+"""A terrace's edge (``_steps``): a neighbouring column's ground more than ``GROUND_BAND`` and at most this
+fraction of the extent above a column's own, level with the neighbour opposite (a step of 10 % of a
+tree's height is 0.106 of scan 06's extent); terraces have at least this many such columns (an edge
+runs across the ground) and at least this share of the occupied columns on the surface (real ground
+under a tree: 0.999-1.0; a tree's or a wall's side taken for ground: 0.66-0.90, whose few rises moved
+wall-sweep confidences by up to 0.09; a trunk's column on a 15-45 % slope: 1-4 columns)."""
+
+
+def _steps(low: np.ndarray, surface: np.ndarray, base: np.ndarray, height: float) -> tuple:
+    """The terrace edges of ``ground_band``'s grid: for each column, the rises from its ``base`` to the
+    lowest and the highest ground (a lowest point within ``GROUND_TOL`` of its 3 x 3 median) of its 8
+    neighbours lying more than ``GROUND_BAND`` and at most ``GROUND_STEP`` of ``height`` above it while the
+    neighbour opposite is level with it (0: none); () when the grid has no terraces (``STEP_COLUMNS``,
+    ``STEP_ON``). A column across a terrace's edge holds both levels; the band from its lowest point left
+    the upper level in (a step of 6 % of the height against a band of 3 %), which widened the trunk's
+    slice from 0.37 m to 14-15 m and left Z unsure (0.52-0.61, session 21). Only the upper level is left
+    out, not the height between: a trunk standing on the edge keeps its foot (leaving out the column up
+    to the upper band took it, and Z fell from 0.98 to 0.58)."""
+    with np.errstate(invalid="ignore"):
+        level = np.where(np.abs(low - surface) < GROUND_TOL * height, low, np.nan)
+    if np.isfinite(level).sum() < STEP_ON * np.isfinite(low).sum():
+        return ()
+    pad = np.pad(level, 1, constant_values=np.nan)
+    rows, cols = base.shape
+    lowest, highest = np.full(base.shape, np.inf), np.zeros(base.shape)
+    with np.errstate(invalid="ignore"):  # NaN: an empty column
+        for i, j in ((i, j) for i in range(3) for j in range(3) if (i, j) != (1, 1)):
+            d = pad[i:i + rows, j:j + cols] - base
+            level_across = np.abs(pad[2 - i:2 - i + rows, 2 - j:2 - j + cols] - base) < GROUND_TOL * height
+            step = (d > GROUND_BAND * height) & (d <= GROUND_STEP * height) & level_across
+            lowest = np.where(step, np.minimum(lowest, d), lowest)
+            highest = np.where(step, np.maximum(highest, d), highest)
+    if (highest > 0).sum() < STEP_COLUMNS:
+        return ()
+    return np.where(np.isfinite(lowest), lowest, 0.0), highest
 
 
 def _grass_top(up: np.ndarray, across: np.ndarray, height: float) -> float:
