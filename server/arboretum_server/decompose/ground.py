@@ -63,10 +63,18 @@ GROUND_BEND = 0.15
 """A curved ground rises or falls at most this fraction of the height from its plane part."""
 GROUND_TRUNK = 0.5
 """A ground has no trunk going on below it (``_trunk_below``): refused when a narrow column of points
-rises from 15 slices under it to its band holding from this share to its inverse of what the same
-column holds in slices 3-17 above it (a tree with no ground, a trunk of 300-500 points and dense flat
-branch layers had its lowest layer, 18-24 % of the height up the trunk, cut as the ground in 37 of 48
-clouds)."""
+rises from its foot (the lowest 15 slices of what lies under it, ``GROUND_TRUNK_DEEP`` slices or more
+down) to its band holding from this share to its inverse of what the same column holds in slices 3-17
+above it (a tree with no ground, a trunk of 300-500 points and dense flat branch layers had its lowest
+layer, 18-24 % of the height up the trunk, cut as the ground in 37 of 48 clouds)."""
+GROUND_TRUNK_DEEP = 20
+"""``_trunk_below`` looks only at a column reaching this many slices (``ground_band`` / 3 of the height
+over the ground each: 10 % of it at the default band) or more under the ground: the trunk under a
+groundless tree's lowest branch layer goes down 18-24 % of the height, but a trunk mirrored in a
+puddle, a root plate seen 0.5-0.8 m under the ground, or a post in a hole, under a 10 m tree, reach
+10-16 slices and were refused as trunks (helper-153: 8 of 24 mirrored trunks, 2 of 3 root plates). A
+lowest layer 9 % of the height up or more still reaches it; a post or a root plate 1.2 m under a 10 m
+tree does too, and is refused."""
 GROUND_APART = 0.1
 """At most this share of the points, set apart under the rest by a gap in z of ``GROUND_DIP`` of the
 height or more, is looked past first (``_apart_below``): a clump of 2 % of scan 10's points 10 % of the
@@ -207,13 +215,16 @@ def find_ground(pts: np.ndarray, band_frac: float) -> tuple[np.ndarray, Ground |
 
     When a few points lie apart under the rest (``_apart_below``: a clump or a strip of strays), the
     ground is searched for first among the rest (``_search``) and cut with those points when they all
-    lie under it; else (no ground, or the lowest step of a terraced ground, which lies beside the others)
+    lie under it and the trunk does not go on down through them (``_trunk_under``: a groundless tree's
+    trunk unseen for a stretch under its lowest branch layer was set apart, the layer cut as the ground
+    with it); else (no ground, or the lowest step of a terraced ground, which lies beside the others)
     among all the points.
     """
     apart = _apart_below(pts[:, 2])
     if apart is not None:
         ground, surface = _search(pts[~apart], band_frac)
-        if surface is not None and (pts[apart, 2] < surface.height(pts[apart, :2])).all():
+        if surface is not None and (pts[apart, 2] < surface.height(pts[apart, :2])).all() \
+                and not _trunk_under(pts, surface, band_frac):
             cut = apart.copy()
             cut[~apart] = ground
             return cut, surface
@@ -231,6 +242,15 @@ def _apart_below(z: np.ndarray) -> np.ndarray | None:
     k = int(GROUND_APART * len(zs))
     gaps = np.flatnonzero(np.diff(zs[:k + 1]) >= GROUND_DIP * (hi - lo))
     return z < zs[gaps[-1] + 1] if len(gaps) else None
+
+
+def _trunk_under(pts: np.ndarray, surface: Ground, band_frac: float) -> bool:
+    """``_trunk_below`` for all of ``pts`` (N, 3) under ``surface``, found among the points not set apart
+    (``find_ground``), with ``_cut``'s slices and ground spread."""
+    up = pts[:, 2] - surface.height(pts[:, :2])
+    lo, hi = body_span(pts[:, 2])
+    step = band_frac * float(up[(pts[:, 2] >= lo) & (pts[:, 2] <= hi)].max()) / 3
+    return _trunk_below(pts, up, step, _spread(pts[np.abs(up) < 1.5 * step]))
 
 
 def _search(pts: np.ndarray, band_frac: float) -> Found:
@@ -495,19 +515,21 @@ def _cut(pts: np.ndarray, under: np.ndarray, band_frac: float, inside: np.ndarra
 
 def _trunk_below(pts: np.ndarray, up: np.ndarray, step: float, wide: float) -> bool:
     """Whether the trunk goes on under a ground, down to its own foot (``_cut``; ``up``: (N,) heights of
-    ``pts`` (N, 3) above it, ``step``: a slice's thickness, ``wide``: the ground's spread): the points in
-    the 15 lowest slices under the band, at least 10, are a column narrower than a ground (under ``wide``
-    / ``GROUND_WIDER``), the points within twice its spread of its axis rise from it to the band with no
-    gap of 15 slices, and the same column holds at least 10 points in slices 3-17 above the ground, as
-    many as the foot within a factor of 1 / ``GROUND_TRUNK``. Strays under a ground (outliers, multipath
-    echoes) spread over its whole area, a clump apart from it leaves a gap, the bottom of a hollow or a
-    ditch has no trunk over it."""
+    ``pts`` (N, 3) above it, ``step``: a slice's thickness, ``wide``: the ground's spread): the points
+    under the band reach ``GROUND_TRUNK_DEEP`` slices down, the 15 lowest slices of them (the foot), at
+    least 10 points, are a column wider than none (a plumb line's repeated xy) and narrower than a
+    ground (under ``wide`` / ``GROUND_WIDER``), the points within twice its spread of its axis rise from
+    it to the band with no gap of 15 slices, and the same column holds at least 10 points in slices 3-17
+    above the ground, as many as the foot within a factor of 1 / ``GROUND_TRUNK``. Strays under a ground
+    (outliers, multipath echoes) spread over its whole area, a clump apart from it leaves a gap, the
+    bottom of a hollow or a ditch has no trunk over it; a trunk mirrored in a puddle or a root plate
+    seen under the ground does not reach so deep."""
     under = np.flatnonzero(up < -1.5 * step)
-    if len(under) < 10:
+    if len(under) < 10 or up[under].min() > -GROUND_TRUNK_DEEP * step:
         return False
     foot = pts[under[up[under] < up[under].min() + 15 * step]]
     spread = _spread(foot)
-    if len(foot) < 10 or spread >= wide / GROUND_WIDER:  # strays spread like the ground over its area
+    if len(foot) < 10 or not 0 < spread < wide / GROUND_WIDER:  # strays spread like the ground over its area
         return False
     centre = np.median(foot[:, :2], axis=0)
     high = np.flatnonzero((up >= 3 * step) & (up < 18 * step))
