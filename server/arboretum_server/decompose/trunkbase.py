@@ -51,9 +51,10 @@ def find_root(pts: np.ndarray, up: np.ndarray | None = None, cut: float | None =
 
     The band is the lowest ``BASE_BAND`` of the height, measured in ``up`` (N,), each point's height
     above the ground, when one was found (a second tree up the slope stands in it too), else from the
-    lowest point. When the band holds no big cluster nor any point with ``BASE_NEIGHBOURS`` others
-    within ``LINK`` of the height, it starts at the lowest such point instead (``_dense_start``: lone
-    points under the trunk).
+    lowest point. When the band holds no big cluster, or its largest is outliers linked into a web
+    (``_strewn``), and no point with more neighbours within ``LINK`` of the height than an outlier has
+    (``_lone_most``), it starts at the lowest such point instead (``_dense_start``: lone points under the
+    trunk; a flat patch there has the several-trees check run above it, ``_above_cut``).
     InputError when the band holds several well-separated trunks (clusters hanging from the crown aside:
     ``STANDING``, ``_no_column``), or when its largest cluster spreads too wide to be one trunk base.
     A second tree standing higher than the band is not refused here: see ``columns.trunk_columns``.
@@ -69,9 +70,12 @@ def find_root(pts: np.ndarray, up: np.ndarray | None = None, cut: float | None =
     up = z if up is None else up
     start = float(up.min())
     band, lab, big = _band(pts, up, h, start)
-    if not len(big) and (dense := _dense_start(pts, up, h)) > start + BASE_BAND * h:  # lone points under it
+    if (not len(big) or _strewn(pts, up, h, band[lab == big[0]])) \
+            and (dense := _dense_start(pts, up, h)) > start + BASE_BAND * h:  # lone points under it
         start = dense
         band, lab, big = _band(pts, up, h, start)
+        if len(big) and _flat(np.c_[pts[band, :2], up[band]][lab == big[0]], h):  # ground among outliers,
+            _above_cut(pts, up, h, start)  # perhaps two trees' patches joined: look above it
     if cut is not None and cut > start:
         _above_cut(pts, up, h, cut)
     trunk = pts[band[lab == big[0]]] if len(big) else pts[band]
@@ -116,25 +120,72 @@ def _above_cut(pts: np.ndarray, up: np.ndarray, h: float, cut: float) -> None:
 
 
 def _dense_start(pts: np.ndarray, up: np.ndarray, h: float) -> float:
-    """The lowest ``up`` (N,) of a point of ``pts`` (N, 3) with ``BASE_NEIGHBOURS`` others within ``LINK``
-    of the height ``h`` (x, y and ``up``): outliers strewn under a tree with no ground stand alone there
-    (scans 01, 06, 07 and the harmonic apple with 0.5-5 % uniform outliers: the root went onto them, up
-    to 25 % of the height low, or the band was refused as too wide), a trunk's foot does not. The lowest
-    point when none has."""
+    """The lowest ``up`` (N,) of a point of ``pts`` (N, 3) with ``_lone_most`` others or more (at least
+    ``BASE_NEIGHBOURS``) within ``LINK`` of the height ``h`` (x, y and ``up``): outliers strewn under a
+    tree with no ground stand alone there (scans 01, 06, 07 and the harmonic apple with 0.5-5 % uniform
+    outliers: the root went onto them, up to 25 % of the height low, or the band was refused as too
+    wide), a trunk's foot does not. The lowest point when none has."""
     from scipy.spatial import cKDTree
 
     q = np.c_[pts[:, :2], up]
     tree = cKDTree(q)
     if not _dense_enough(tree, q, LINK * h):
         return float(up.min())
+    need = _lone_most(tree, q, LINK * h)
     order = np.argsort(up, kind="stable")
     for at in range(0, len(order), 256):  # the lowest first: the trunk's foot comes soon
         some = order[at:at + 256]
         count = tree.query_ball_point(q[some], LINK * h, return_length=True)
-        dense = np.flatnonzero(count > BASE_NEIGHBOURS)  # itself counted
+        dense = np.flatnonzero(count > need)  # itself counted
         if len(dense):
             return float(up[some[dense[0]]])
     return float(up.min())
+
+
+PROBES = 2000
+"""``_lone_most`` counts the points round this many places drawn uniformly over the cloud's box."""
+
+
+def _lone_most(tree, q: np.ndarray, radius: float) -> int:
+    """How many others within ``radius`` a point of ``q`` (N, 3) (``tree``: its cKDTree) needs to be no
+    outlier: ``BASE_NEIGHBOURS``, or more where outliers are dense, mu + 4 sqrt(mu) + 2 for
+    mu the median count round ``PROBES`` places drawn over the box (a tree fills little of it; uniform
+    outliers fill it all). A pine 20 tall with a crown 1.2 wide and 5-30 % uniform outliers in a box 20 %
+    wider has mu 1-7, and some of them 4-8 others near: the root went onto them, 2-4 under its foot,
+    in 52 of 240 draws; scans 01, 06, 07 with up to 5 % outliers in their wider boxes have mu 0."""
+    lo, hi = q.min(axis=0), q.max(axis=0)
+    at = np.random.default_rng(0).uniform(lo, hi, (PROBES, 3))
+    mu = float(np.median(tree.query_ball_point(at, radius, return_length=True)))
+    return max(BASE_NEIGHBOURS, int(mu + 4.0 * np.sqrt(mu) + 2.0))
+
+
+CORE = 16
+"""A trunk's foot holds points with more than this many others within ``LINK`` of the height (a typical
+point in a cloud ``_dense_enough``): a band's cluster with ``BASE_MIN`` such points is no outliers'
+web (``_strewn``)."""
+
+
+def _strewn(pts: np.ndarray, up: np.ndarray, h: float, cluster: np.ndarray) -> bool:
+    """Whether the base band's largest cluster (indices ``cluster`` into ``pts`` (N, 3)) is outliers linked
+    into a web, not a trunk's foot: in a cloud ``_dense_enough`` where outliers are dense (``_lone_most``
+    above ``BASE_NEIGHBOURS``), fewer than ``BASE_MIN`` of its points (of up to 2,000 drawn) have more
+    others than an outlier within ``LINK`` of the height ``h`` (a pine 20 tall, 1.2 wide, with 15-30 %
+    uniform outliers and a ground found on their floor: the root went 2-3.4 under its foot). Points with
+    ``CORE`` others are looked for first, near the band only: a trunk's foot has them."""
+    from scipy.spatial import cKDTree
+
+    r = LINK * h
+    if len(cluster) > 2000:
+        cluster = np.random.default_rng(0).choice(cluster, 2000, replace=False)
+    near = np.flatnonzero((up >= up[cluster].min() - r) & (up <= up[cluster].max() + r))
+    q = np.c_[pts[:, :2], up]
+    count = cKDTree(q[near]).query_ball_point(q[cluster], r, return_length=True)
+    if (count > CORE).sum() >= BASE_MIN:
+        return False
+    tree = cKDTree(q)
+    if not _dense_enough(tree, q, r) or (need := _lone_most(tree, q, r)) <= BASE_NEIGHBOURS:
+        return False
+    return bool((count > need).sum() < BASE_MIN)
 
 
 SPARSE_SHARE = 0.25
@@ -303,3 +354,4 @@ def _flat(cluster: np.ndarray, h: float) -> bool:
     height ``h`` (no trunk is) and than twice its own height."""
     r90 = plan_radius(cluster, 90)
     return r90 > 0.5 * MAX_BASE_SPREAD * h and float(np.ptp(cluster[:, 2])) < 0.5 * r90
+
