@@ -1,4 +1,4 @@
-"""Ground (session 22, helper-153's review of helper-151's ``_trunk_below`` and ``_apart_below``): a
+"""Ground (session 22, helper-151's review of helper-149's ``_trunk_below`` and ``_apart_below``): a
 groundless tree whose trunk is unseen for 0.8 m under its lowest branch layer had the layer cut as the
 ground with the lower trunk; a trunk mirrored in a puddle, a root plate or a post in a hole, a narrow
 column 0.5-1 m under a real ground, had the ground refused; a plumb line's repeated xy under the ground
@@ -13,7 +13,7 @@ from test_ground_s22_under import whorled
 
 def tree(*under: np.ndarray) -> np.ndarray:
     """A 10 m trunk (2,000 points, radius 0.1 m) with a crown over a ground disc of 8,000 points 3 m
-    across (seed 0, helper-153's ``cases.tree``), and the points ``under`` added."""
+    across (seed 0, helper-151's ``cases.tree``), and the points ``under`` added."""
     rng = np.random.default_rng(0)
     a, z = rng.uniform(0, 2 * np.pi, 2000), rng.uniform(0, 10, 2000)
     trunk = np.c_[0.1 * np.cos(a), 0.1 * np.sin(a), z]

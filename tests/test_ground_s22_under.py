@@ -1,4 +1,4 @@
-"""Ground (session 22, helper-151): what lies under a ground. A tree with no ground, a trunk sampled by
+"""Ground (session 22, helper-149): what lies under a ground. A tree with no ground, a trunk sampled by
 500 points and dense flat branch layers had its lowest layer cut as the ground (the trunk under it held
 under 1 % of the points: 37 of 48 such clouds with trunks of 300-500 points, the layer 18-24 % of
 the height up); a ground has no trunk

@@ -1,4 +1,4 @@
-"""``--up auto`` on a tree on hummocky ground (session 22, helper-156's finding). Smooth bumps with a
+"""``--up auto`` on a tree on hummocky ground (session 22, helper-154's finding). Smooth bumps with a
 standard deviation of 3 % of the tree's height, 0.1-0.2 heights apart, leave under half of the lowest
 points of ``ground_band``'s columns (1/50 of the cloud wide, half a bump) within 1 % of the extent of
 their 3 x 3 median: no ground was found under Z, the ground disc (3 heights wide) made the cloud as

@@ -1,4 +1,4 @@
-"""A tree with no ground among outliers (session 22, helper-155).
+"""A tree with no ground among outliers (session 22, helper-153).
 
 A pine 20 tall with a narrow crown (1.2 wide) and no ground, among 5-30 % uniform outliers in a box 20 %
 wider than it: in a box that narrow some outliers have 4-6 others within 2 % of the height, so

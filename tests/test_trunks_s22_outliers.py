@@ -1,4 +1,4 @@
-"""Several trees among outliers (session 22, helper-150). Two pines 20 tall on ground patches, 3 or 6
+"""Several trees among outliers (session 22, helper-148). Two pines 20 tall on ground patches, 3 or 6
 apart, with 2-15 % uniform outliers, were accepted as one tree in 23 of 40 clouds of helper-146's harness
 (16 of 40 with each patch under its own pine, as here): the ground cut keeps only the trunk of its
 narrowest slice, so with outliers widening the slices it cut the other tree's foot 0.45-2.4 above the

@@ -72,7 +72,7 @@ GROUND_TRUNK_DEEP = 20
 over the ground each: 10 % of it at the default band) or more under the ground: the trunk under a
 groundless tree's lowest branch layer goes down 18-24 % of the height, but a trunk mirrored in a
 puddle, a root plate seen 0.5-0.8 m under the ground, or a post in a hole, under a 10 m tree, reach
-10-16 slices and were refused as trunks (helper-153: 8 of 24 mirrored trunks, 2 of 3 root plates). A
+10-16 slices and were refused as trunks (helper-151: 8 of 24 mirrored trunks, 2 of 3 root plates). A
 lowest layer 9 % of the height up or more still reaches it; a post or a root plate 1.2 m under a 10 m
 tree does too, and is refused."""
 GROUND_APART = 0.1
