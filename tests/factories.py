@@ -368,6 +368,30 @@ def las_file(path: Path, pts: np.ndarray, scale: float = 1e-4) -> Path:
     return path
 
 
+def layered_tree(seed: int, n_trunk: int, slope: float, thick: float = 0.05) -> np.ndarray:
+    """A tree 20 tall with no ground: a trunk 0.15 wide seen by ``n_trunk`` points through five dense flat
+    branch layers of 3,000 points at 4, 7, 10, 13 and 16, rising ``slope`` outwards, ``thick`` (sd) thick."""
+    rng = np.random.default_rng(seed)
+    a, z = rng.uniform(0, 2 * np.pi, n_trunk), rng.uniform(0, 20, n_trunk)
+    parts = [np.c_[0.15 * np.cos(a), 0.15 * np.sin(a), z]]
+    for level in (4, 7, 10, 13, 16):
+        reach = 2.5 * (20 - level) / 16
+        r, b = reach * np.sqrt(rng.uniform(0.02, 1, 3000)), rng.uniform(0, 2 * np.pi, 3000)
+        parts.append(np.c_[r * np.cos(b), r * np.sin(b), level + slope * r + rng.normal(0, thick, 3000)])
+    return np.concatenate(parts)
+
+
+def trunk_on_disc(rng: np.random.Generator) -> np.ndarray:
+    """A 10 m trunk (2,000 points, radius 0.1) with a crown (6,000) over a ground disc 3 in radius
+    (8,000 points first), drawn from ``rng``."""
+    a, z = rng.uniform(0, 2 * np.pi, 2000), rng.uniform(0, 10, 2000)
+    trunk = np.c_[0.1 * np.cos(a), 0.1 * np.sin(a), z]
+    r, b = 3 * np.sqrt(rng.uniform(0, 1, 8000)), rng.uniform(0, 2 * np.pi, 8000)
+    disc = np.c_[r * np.cos(b), r * np.sin(b), rng.normal(0, 0.01, 8000)]
+    crown = np.c_[rng.normal(0, 1, (6000, 2)), rng.uniform(4, 10, 6000)]
+    return np.r_[disc, trunk, crown]
+
+
 def strewn(pts: np.ndarray, share: float, seed: int, wider: float = 0.2) -> np.ndarray:
     """``share`` of the points of ``pts`` (N, 3) strewn uniformly over a box ``wider`` (a fraction) than
     it each way."""

@@ -17,7 +17,7 @@ from arboretum_server.decompose.ground import find_ground
 from arboretum_server.decompose.options import DecomposeOptions
 from arboretum_server.decompose.preprocess import prepare
 from arboretum_server.decompose.strays import scattered
-from factories import prepared_root, real_scan, strewn
+from factories import layered_tree, prepared_root, real_scan, strewn
 
 
 def _pine():
@@ -74,24 +74,11 @@ def test_scattered_counts_outliers_not_a_sparse_ground():
     assert scattered(pts) == 0.0
 
 
-def _layered(seed, trunk_points, slope):
-    """A tree 20 tall with no ground: a trunk 0.15 wide seen by ``trunk_points`` points, and 5 dense flat
-    branch layers (3,000 points each, rising ``slope`` outwards) at 4, 7, 10, 13 and 16."""
-    rng = np.random.default_rng(seed)
-    a, z = rng.uniform(0, 2 * np.pi, trunk_points), rng.uniform(0, 20, trunk_points)
-    parts = [np.c_[0.15 * np.cos(a), 0.15 * np.sin(a), z]]
-    for level in (4, 7, 10, 13, 16):
-        reach = 2.5 * (20 - level) / 16
-        r, b = reach * np.sqrt(rng.uniform(0.02, 1, 3000)), rng.uniform(0, 2 * np.pi, 3000)
-        parts.append(np.c_[r * np.cos(b), r * np.sin(b), level + slope * r + rng.normal(0, 0.05, 3000)])
-    return np.concatenate(parts)
-
-
 @pytest.mark.parametrize("seed, trunk_points, slope", [(0, 1000, 0.0), (0, 2000, 0.0), (1, 1000, 0.2), (2, 1000, 0.4)])
 def test_a_branch_layer_over_a_sparse_trunk_is_no_ground(seed, trunk_points, slope):
     # helper-146's review: the 6-24 deep held searches found a layer as ground (3.9-12.9 up a 20 tall
     # tree, 3,000-13,000 points cut) in 24 of 48 such clouds; they run only among many scattered points
-    pts = _layered(seed, trunk_points, slope)
+    pts = layered_tree(seed, trunk_points, slope)
     ground, surface = find_ground(pts, DecomposeOptions().ground_band)
     assert surface is None and ground.sum() == 0
     assert scattered(pts) < 0.03

@@ -8,19 +8,13 @@ import numpy as np
 import pytest
 
 from arboretum_server.decompose.ground import find_ground
-from test_ground_s22_under import whorled
+from factories import layered_tree, trunk_on_disc
 
 
 def tree(*under: np.ndarray) -> np.ndarray:
     """A 10 m trunk (2,000 points, radius 0.1 m) with a crown over a ground disc of 8,000 points 3 m
     across (seed 0, helper-151's ``cases.tree``), and the points ``under`` added."""
-    rng = np.random.default_rng(0)
-    a, z = rng.uniform(0, 2 * np.pi, 2000), rng.uniform(0, 10, 2000)
-    trunk = np.c_[0.1 * np.cos(a), 0.1 * np.sin(a), z]
-    r, b = 3 * np.sqrt(rng.uniform(0, 1, 8000)), rng.uniform(0, 2 * np.pi, 8000)
-    disc = np.c_[r * np.cos(b), r * np.sin(b), rng.normal(0, 0.01, 8000)]
-    crown = np.c_[rng.normal(0, 1, (6000, 2)), rng.uniform(4, 10, 6000)]
-    return np.r_[disc, trunk, crown, *under]
+    return np.r_[trunk_on_disc(np.random.default_rng(0)), *under]
 
 
 def column(x: float, radius: float, n: int, bottom: float, top: float) -> np.ndarray:
@@ -41,7 +35,7 @@ def found_at_zero(pts: np.ndarray) -> bool:
 def test_a_trunk_unseen_under_the_lowest_layer_is_no_ground(seed, n_trunk, slope):
     # before: the trunk under the gap set apart, the layer at 4 m found among the rest and cut as the
     # ground with it (the root 4.2-4.4 m up a tree with no ground)
-    pts = whorled(seed, n_trunk, slope, 0.05)
+    pts = layered_tree(seed, n_trunk, slope)
     gap = (np.hypot(pts[:, 0], pts[:, 1]) < 0.2) & (pts[:, 2] > 3.0) & (pts[:, 2] < 3.8)
     ground, surface = find_ground(pts[~gap], 0.015)
     assert surface is None and ground.sum() == 0

@@ -9,20 +9,7 @@ import numpy as np
 import pytest
 
 from arboretum_server.decompose.ground import find_ground
-from factories import prepared_root, real_scan, strewn
-
-
-def whorled(seed: int, n_trunk: int, slope: float, thick: float) -> np.ndarray:
-    """A trunk 20 m tall (``n_trunk`` points, radius 0.15 m) through five flat branch layers of 3,000
-    points each at 4-16 m, rising ``slope`` outwards and ``thick`` (sd, m) thick; no ground."""
-    rng = np.random.default_rng(seed)
-    a, z = rng.uniform(0, 2 * np.pi, n_trunk), rng.uniform(0, 20, n_trunk)
-    parts = [np.c_[0.15 * np.cos(a), 0.15 * np.sin(a), z]]
-    for level in (4, 7, 10, 13, 16):
-        reach = 2.5 * (20 - level) / 16
-        r, b = reach * np.sqrt(rng.uniform(0.02, 1, 3000)), rng.uniform(0, 2 * np.pi, 3000)
-        parts.append(np.c_[r * np.cos(b), r * np.sin(b), level + slope * r + rng.normal(0, thick, 3000)])
-    return np.concatenate(parts)
+from factories import layered_tree, prepared_root, real_scan, strewn, trunk_on_disc
 
 
 @pytest.mark.parametrize("seed, n_trunk, slope, thick", [(0, 500, 0.0, 0.05), (1, 500, 0.4, 0.15),
@@ -30,7 +17,7 @@ def whorled(seed: int, n_trunk: int, slope: float, thick: float) -> np.ndarray:
                                                          (0, 300, 0.0, 0.15), (3, 500, 0.4, 0.05)])
 def test_a_sparse_trunk_under_dense_layers_is_no_ground(seed, n_trunk, slope, thick):
     # before: the layer at 4 m cut as the ground (2,700-3,100 points) in each of these
-    ground, surface = find_ground(whorled(seed, n_trunk, slope, thick), 0.015)
+    ground, surface = find_ground(layered_tree(seed, n_trunk, slope, thick), 0.015)
     assert surface is None and ground.sum() == 0
 
 
@@ -38,12 +25,8 @@ def test_a_ground_with_echoes_under_its_whole_area_is_still_found():
     # a guard (it held before too): 3 % of the points echoed under a ground disc, down to 20 % of the
     # height under it, right under the trunk as well; no trunk going on below
     rng = np.random.default_rng(1)
-    a, z = rng.uniform(0, 2 * np.pi, 2000), rng.uniform(0, 10, 2000)
-    trunk = np.c_[0.1 * np.cos(a), 0.1 * np.sin(a), z]
-    r, b = 3 * np.sqrt(rng.uniform(0, 1, 8000)), rng.uniform(0, 2 * np.pi, 8000)
-    disc = np.c_[r * np.cos(b), r * np.sin(b), rng.normal(0, 0.01, 8000)]
-    crown = np.c_[rng.normal(0, 1, (6000, 2)), rng.uniform(4, 10, 6000)]
-    pts = np.r_[disc, trunk, crown]
+    pts = trunk_on_disc(rng)
+    disc = pts[:8000]
     echo = disc[rng.integers(0, len(disc), 480)] - np.c_[np.zeros((480, 2)), rng.uniform(0, 2, 480)]
     ground, surface = find_ground(np.r_[pts, echo], 0.015)
     assert surface is not None and abs(float(surface.height(np.zeros((1, 2)))[0])) < 0.05
