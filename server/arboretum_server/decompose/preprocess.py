@@ -98,7 +98,7 @@ def prepare(
     sub = pts[idx]
     _check_counts(len(sub), options)
     up = sub[:, 2] if surface is None else sub[:, 2] - surface.height(sub[:, :2])
-    root = _rooted(sub, None if surface is None else up, _cut_top(pts[keep][ground], surface))
+    root = _rooted(sub, None if surface is None else up, _cut_top(pts[np.flatnonzero(keep)[ground]], surface))
     cols = trunk_columns(sub, root, up)
     height = float(sub[:, 2].max() - root[2])
     scale = WORK_HEIGHT / height
