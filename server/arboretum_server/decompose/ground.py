@@ -238,9 +238,10 @@ def _apart_below(z: np.ndarray) -> np.ndarray | None:
     lo, hi = body_span(z)
     if hi <= lo:
         return None
-    zs = np.sort(z[(z >= lo) & (z <= hi)])
-    k = int(GROUND_APART * len(zs))
-    gaps = np.flatnonzero(np.diff(zs[:k + 1]) >= GROUND_DIP * (hi - lo))
+    body = z[(z >= lo) & (z <= hi)]
+    k = int(GROUND_APART * len(body))
+    zs = np.sort(np.partition(body, k)[:k + 1])  # the lowest k + 1 in order, without sorting them all
+    gaps = np.flatnonzero(np.diff(zs) >= GROUND_DIP * (hi - lo))
     return z < zs[gaps[-1] + 1] if len(gaps) else None
 
 
