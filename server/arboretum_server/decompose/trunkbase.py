@@ -62,8 +62,8 @@ def find_root(pts: np.ndarray, up: np.ndarray | None = None, cut: float | None =
     When the band starts lower, the several-trees check is made on a band from there too (``_above_cut``):
     the ground cut keeps only the trunk of the narrowest slice, so another tree's foot went with the
     ground and stood above the band (two pines among 2-15 % uniform outliers, the cut risen 0.45-2.4 m
-    on 20 m in 16 of them: taken as one tree in 23 of 40 clouds, helper-146; 6 now, their ground tilted or found on the
-    outliers' floor). Only to refuse: the root stays.
+    on 20 m in 16 of them: taken as one tree in 23 of 40 clouds, helper-146; 6 now, their ground tilted
+    or found on the outliers' floor). Only to refuse: the root stays.
     """
     z = pts[:, 2]
     h = np.ptp(z)
