@@ -164,6 +164,11 @@ def scan_notes(stats: dict) -> list[str]:
         out.append(f"{n} stray point{'s' if n > 1 else ''} left out: alone, or in small groups below or above "
                    "the tree, over a tenth of its height from the rest of the cloud (scanner noise, a bird?); "
                    "they would have set the trunk base or the height")
+    if stats.get("apart"):
+        n = stats["apart"]
+        out.append(f"{n} point{'s' if n > 1 else ''} under the tree left out: a small piece apart from the trunk's "
+                   "foot (a clump, a stump or a bush beside it?) that would have been taken for the trunk base; "
+                   "if it was the trunk's own foot, the root now sits higher than it should")
     off = stats.get("labels") == "leaf-off"  # declared leafless: the guess's "leaf" is fine wood, routed alike
     leaf = stats.get("fine_wood_points" if off else "leaf_points", 0) / max(stats.get("points", 0), 1)
     if leaf >= ALL_LEAF:

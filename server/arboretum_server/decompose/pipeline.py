@@ -191,6 +191,7 @@ def decompose(points: np.ndarray, options: DecomposeOptions = DecomposeOptions()
     stats = {
         "points": len(pts), "height": WORK_HEIGHT / prep.scale, "leaf_points": int((said == LEAF).sum()),
         "ground_removed": prep.ground_removed, "repeated": prep.repeats.as_stats(), "strays": prep.strays,
+        "apart": prep.apart,
         "trunk_columns": [c._asdict() | {"foot": list(c.foot)} for c in prep.columns], "width_ratio": width_ratio(pts),
         "labels": "leaf-off" if o.leaf_off else "given" if prep.labels is not None else "guessed",
         "components": g.components, "bridges": g.bridges, "foliage_source": source,

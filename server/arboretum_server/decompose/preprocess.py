@@ -23,7 +23,7 @@ from .columns import Column, trunk_columns
 from .ground import find_ground
 from .options import WORK_HEIGHT, DecomposeOptions
 from .strays import SCATTER_SHARE, scattered, strays
-from .trunkbase import find_root
+from .trunkbase import detached, find_root, under
 
 PILE_APART = 0.25
 """The most repeated point is left out when every other point lies farther from it than this fraction of
@@ -52,6 +52,9 @@ class Prepared:
     """Exact duplicates merged before anything else (``distinct_rows``)."""
     strays: int = 0
     """Points of the sample left out as strays (``strays``)."""
+    apart: int = 0
+    """Points of the sample left out as pieces apart under the tree (``trunkbase.detached``): a clump, a
+    stump or a bush the root had gone onto."""
 
 
 def validate(points: np.ndarray, options: DecomposeOptions) -> np.ndarray:
@@ -98,7 +101,8 @@ def prepare(
     sub = pts[idx]
     _check_counts(len(sub), options)
     up = sub[:, 2] if surface is None else sub[:, 2] - surface.height(sub[:, :2])
-    root = _rooted(sub, None if surface is None else up, _cut_top(pts[np.flatnonzero(keep)[ground]], surface))
+    root, kept = _rooted(sub, None if surface is None else up, _cut_top(pts[np.flatnonzero(keep)[ground]], surface))
+    idx, sub, up = idx[kept], sub[kept], up[kept]
     cols = trunk_columns(sub, root, up)
     height = float(sub[:, 2].max() - root[2])
     scale = WORK_HEIGHT / height
@@ -109,7 +113,7 @@ def prepare(
             raise OptionError(f"labels: {lab.shape[0]} labels for {len(pts)} points")
         lab = (lab[idx] > 0).astype(np.uint8)
     return Prepared((sub - root) * scale, idx, lab, root, scale, int(ground.sum()), tuple(cols), repeats,
-                    int(stray.sum()))
+                    int(stray.sum()), int((~kept).sum()))
 
 
 def _cut_top(cut: np.ndarray, surface) -> float | None:
@@ -120,13 +124,42 @@ def _cut_top(cut: np.ndarray, surface) -> float | None:
     return float((cut[:, 2] - surface.height(cut[:, :2])).max())
 
 
-def _rooted(sub: np.ndarray, up: np.ndarray | None, cut: float | None = None) -> np.ndarray:
+def _rooted(sub: np.ndarray, up: np.ndarray | None, cut: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``find_root``'s trunk base of ``sub`` (N, 3) (``up``: heights above the ground, or None; ``cut``:
-    the ground cut's top, ``_cut_top``); when it
-    is refused and ``SCATTER_SHARE`` of the points or more stand apart (``scattered``), the refusal names
-    them too: outliers strewn round a tree make a base band no trunk holds, and "crop the scan to one
-    standing tree" alone sent the user after the wrong cause. The refusal's own words stay: with two
-    trees and outliers, "separate trunks" is still true (helper-146's review)."""
+    the ground cut's top, ``_cut_top``), and (N,) bool: the points kept. A small piece apart under the
+    tree that the root went onto (``trunkbase.detached``) is left out and the root found again, up to
+    ``APART_TRIES`` times, unless it stands under the trunk rising from the root found then
+    (``trunkbase.under``: that trunk's foot seen apart) or no root is found without it. Refusals:
+    ``_refused``."""
+    kept = np.ones(len(sub), bool)
+    height = sub[:, 2] if up is None else up
+    root = _refused(sub, up, cut)
+    for _ in range(APART_TRIES):
+        piece = np.flatnonzero(kept)[detached(sub[kept], height[kept], root)]
+        if not len(piece):
+            break
+        rest = kept.copy()
+        rest[piece] = False
+        try:
+            above = find_root(sub[rest], None if up is None else up[rest], cut)
+        except InputError:  # the piece is needed: a guiding elm's trunk foot, 20 points under a gap in
+            break  # its trunk, with its crown bent down to the ground round it (the rest: two "trunks")
+        if under(sub[piece], sub[rest], above, float(np.ptp(sub[rest, 2]))):
+            break
+        kept, root = rest, above
+    return root, kept
+
+
+APART_TRIES = 3
+"""``_rooted`` leaves out at most this many pieces apart under the tree (two clumps under scan 01)."""
+
+
+def _refused(sub: np.ndarray, up: np.ndarray | None, cut: float | None) -> np.ndarray:
+    """``find_root`` on ``sub`` (N, 3); when it is refused and ``SCATTER_SHARE`` of the points or more
+    stand apart (``scattered``), the refusal names them too: outliers strewn round a tree make a base
+    band no trunk holds, and "crop the scan to one standing tree" alone sent the user after the wrong
+    cause. The refusal's own words stay: with two trees and outliers, "separate trunks" is still true
+    (helper-146's review)."""
     try:
         return find_root(sub, up, cut)
     except InputError as refusal:
