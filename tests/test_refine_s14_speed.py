@@ -50,7 +50,7 @@ def _blob_lobes(rng, n=12):
 
 
 def test_packed_inside_tests_match_the_lobe_by_lobe_reference(rng):
-    from arboretum_server.decompose.clear import WORK, _blocked, inside_foreign
+    from arboretum_server.decompose.clear import WORK, blocked, inside_foreign
 
     lobes = _blob_lobes(rng)
     q = rng.uniform(-0.1, 1.1, (4000, 3))
@@ -68,7 +68,7 @@ def test_packed_inside_tests_match_the_lobe_by_lobe_reference(rng):
         count = [0]
         WORK["hull_tests"] = 0
         want = _reference_blocked(lobes, j, a, b, 0.005, boxes(lobes), count)
-        assert np.array_equal(_blocked(lobes, j, a, b, 0.005, boxes(lobes)), want) and 0 < want.sum() < 200
+        assert np.array_equal(blocked(lobes, j, a, b, 0.005, boxes(lobes)), want) and 0 < want.sum() < 200
         assert WORK["hull_tests"] < count[0] / 4  # a blocked segment stops at its first sample inside
 
 
@@ -125,7 +125,7 @@ def _run_counted(monkeypatch, fn, reference: bool) -> tuple[object, int, int]:
             def blocked(lobes, j, a, b, step, box):
                 return _reference_blocked(lobes, j, a, b, step, box, tests)
 
-            m.setattr(clear, "_blocked", blocked)
+            m.setattr(clear, "blocked", blocked)
             m.setattr(carve, "_carved", lambda members, pts: {})
         clear.WORK["hull_tests"] = 0
         out = fn()

@@ -108,7 +108,7 @@ def straight_fallback(lobes: list[LobeState], j: int, mains: BranchSet, tries: i
     box = boxes(lobes)
     for start in range(0, len(order), batch):
         cand = order[start : start + batch]
-        bad = _blocked(lobes, j, verts[cand], np.broadcast_to(centre, (len(cand), 3)), step, box)
+        bad = blocked(lobes, j, verts[cand], np.broadcast_to(centre, (len(cand), 3)), step, box)
         if not bad.all():
             i = int(cand[int(np.argmin(bad))])
             return _straight(verts[i], centre, owner[i])
@@ -125,7 +125,7 @@ def straight_routes(lobes: list[LobeState], j: int, mains: BranchSet, tries: int
     order = _nearest_vertices(verts, centre, tries)
     if not len(order):
         return []
-    bad = _blocked(lobes, j, verts[order], np.broadcast_to(centre, (len(order), 3)), step, boxes(lobes))
+    bad = blocked(lobes, j, verts[order], np.broadcast_to(centre, (len(order), 3)), step, boxes(lobes))
     return [_straight(verts[i], centre, owner[i]) for i in order[~bad]]
 
 
@@ -141,7 +141,7 @@ def _straight(start: np.ndarray, centre: np.ndarray, owner: np.ndarray) -> tuple
     return start + np.linspace(0.0, 1.0, m)[:, None] * (centre - start), int(owner[0]), int(owner[1])
 
 
-def _blocked(lobes: list[LobeState], j: int, a: np.ndarray, b: np.ndarray, step: float,
+def blocked(lobes: list[LobeState], j: int, a: np.ndarray, b: np.ndarray, step: float,
              box: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
     """(S,) bool: segments a[i] -> b[i] ((S, 3) each), sampled every ~``step``, with a sample inside a lobe
     other than ``j`` (``hullpack.segments_blocked``: every 4th sample first, and a segment stops at its first
@@ -159,7 +159,7 @@ def _sample_counts(a: np.ndarray, b: np.ndarray, step: float) -> np.ndarray:
 
 def _segment_samples(a: np.ndarray, b: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
     """Points every ~``step`` along the segments a[i] -> b[i] ((S, 3) each) and the segment of each (the
-    samples ``_blocked`` makes one by one, for tests)."""
+    samples ``blocked`` makes one by one, for tests)."""
     counts = _sample_counts(a, b, step)
     which = np.repeat(np.arange(len(a)), counts)
     first = np.cumsum(counts) - counts
@@ -180,7 +180,7 @@ def bent_fallback(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndar
     centre, box = lobes[j].centre, boxes(lobes)
     members = pts[lobes[j].members]
     w = members[:: max(1, len(members) // waypoints)]
-    w = w[~_blocked(lobes, j, w, np.broadcast_to(centre, w.shape), step, box)]
+    w = w[~blocked(lobes, j, w, np.broadcast_to(centre, w.shape), step, box)]
     if not len(w):
         return None
     verts, owner = main_vertices(mains)
@@ -189,7 +189,7 @@ def bent_fallback(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndar
     for start in range(0, len(order), batch):
         v = np.repeat(order[start : start + batch], len(w))  # every (vertex, waypoint) pair of the batch
         ww = np.tile(w, (len(v) // len(w), 1))
-        bad = _blocked(lobes, j, verts[v], ww, step, box)
+        bad = blocked(lobes, j, verts[v], ww, step, box)
         if bad.all():
             continue
         length = np.where(bad, np.inf, np.linalg.norm(ww - verts[v], axis=1) + np.linalg.norm(ww - centre, axis=1))

@@ -2,7 +2,7 @@
 arrays (``HullPack``), then points (``inside_any``) or sampled segments (``segments_blocked``) tested in one
 compiled loop that stops at the first hull holding a point. Each answer is the one ``lobes.inside`` gives
 hull by hull (the same ray-crossing count, ``lobes._crossings_of``), for the refinement repairs
-(``clear.inside_foreign``, ``clear._blocked``) that ask it of every lobe of a tree many times over.
+(``clear.inside_foreign``, ``clear.blocked``) that ask it of every lobe of a tree many times over.
 """
 
 from __future__ import annotations

@@ -13,7 +13,15 @@ from dataclasses import replace
 import numpy as np
 
 from .carve import carve_lobe
-from .clear import bent_fallback, boxes, foreign, inside_foreign, straight_fallback, straight_routes
+from .clear import (
+    bent_fallback,
+    blocked,
+    boxes,
+    foreign,
+    inside_foreign,
+    straight_fallback,
+    straight_routes,
+)
 from .lobes import inside
 from .merge import BranchSet, resample_step, sample_polylines
 from .options import DecomposeOptions
@@ -151,3 +159,87 @@ def entered(before: list[LobeState], after: list[LobeState], changed: list[int],
         if now - was:
             return True
     return False
+
+
+def along(lobes: list[LobeState], n_kept: int, j: int, branch: tuple[np.ndarray, int, int], pts: np.ndarray,
+          o: DecomposeOptions, step: float = 0.0025) -> bool:
+    """New lobe ``j``'s branch along ``branch`` (segment, parent, vertex: the branch of the lobe it was split
+    from) to one of its vertices, then straight to ``j``'s centre: the shortest such route clear of every
+    other lobe, else one bent through one of ``j``'s points (``_along_bent``: or ending there, its new
+    centre), else one clear of the lobes before ``n_kept`` with the new lobes it enters carved out of it
+    (``carve_route``, at most ``ROUTES_TRIED``); True (``lobes`` updated in place) when one clears ``j``.
+
+    The split lobe's branch stayed out of every other lobe and ends inside the pieces, so it reaches pieces
+    that no straight, bent or routed branch from the main branches reaches clear: a pine's lobe split in 20
+    (session 23's probe) left pieces whose every straight route crossed the kept lobes round the main
+    branch beside them, and their routed branches ran 3 cm deep through the lobe wrapping the trunk.
+    """
+    routes = _along_routes(branch, lobes[j].centre)
+    tol = o.step / 2
+    box = boxes(lobes)
+    for seg in routes:
+        if not foreign(lobes, j, seg, tol, box):
+            lobes[j] = replace(lobes[j], segment=seg, parent=branch[1], parent_vertex=branch[2])
+            return True
+    bent = _along_bent(lobes, j, branch[0], pts, tol, box)
+    if bent is not None:
+        lobes[j] = replace(lobes[j], segment=bent[0], centre=bent[1], parent=branch[1], parent_vertex=branch[2])
+        return True
+    lo, hi = (b.copy() for b in box)
+    lo[n_kept:], hi[n_kept:] = np.inf, -np.inf  # the kept lobes alone
+    clear = [seg for seg in routes if not foreign(lobes, j, seg, tol, (lo, hi))]
+    in_way = lobes_entered(lobes, [k for k in range(n_kept, len(lobes)) if k != j],
+                           [sample_polylines([s], step) for s in clear]) if clear else np.zeros(0, int)
+    return any(carve_route(lobes, n_kept, j, (clear[i], branch[1], branch[2]), pts, o, step)
+               for i in np.argsort(in_way, kind="stable")[:ROUTES_TRIED])
+
+
+def _along_bent(lobes: list[LobeState], j: int, seg: np.ndarray, pts: np.ndarray, tol: float, box,
+                waypoints: int = 32, step: float = 0.005) -> tuple[np.ndarray, np.ndarray] | None:
+    """(route, centre) for lobe ``j`` along ``seg`` to its vertex v, then to one of every (n // ``waypoints``)-th
+    of the lobe's n points outside other lobes, then to its centre (the shortest clear such route); else the
+    shortest clear route to one of those points, which becomes the centre (as ``moved_centre`` does); None if
+    no route is clear."""
+    centre = lobes[j].centre
+    own = pts[lobes[j].members]
+    w = own[:: max(1, len(own) // waypoints)]
+    w = w[~inside_foreign(lobes, j, w, box)]
+    seg = np.asarray(seg, np.float64)
+    ok = 0
+    while ok < len(seg) and not foreign(lobes, j, seg[: ok + 1], tol, box):
+        ok += 1
+    if not len(w) or not ok:
+        return None
+    v = np.repeat(np.arange(ok), len(w))
+    a, b = seg[v], np.tile(w, (ok, 1))
+    first = ~blocked(lobes, j, a, b, step, box)
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(seg, axis=0), axis=1))])[v]
+    length = np.where(first, arc + np.linalg.norm(b - a, axis=1), np.inf)
+    last = np.tile(~blocked(lobes, j, w, np.broadcast_to(centre, w.shape), step, box), ok)
+    leg = np.tile(np.linalg.norm(w - centre, axis=1), ok)
+    for total, bend in ((np.where(last, length + leg, np.inf), True), (length, False)):
+        k = int(np.argmin(total))
+        if not np.isfinite(total[k]):
+            continue
+        route = np.vstack([seg[: v[k]], resample_step(np.stack([a[k], b[k]]), 0.01)])
+        if bend:
+            route = np.vstack([route, resample_step(np.stack([b[k], centre]), 0.01)[1:]])
+        if not foreign(lobes, j, route, tol, box):
+            return route, centre if bend else b[k]
+    return None
+
+
+def _along_routes(branch: tuple[np.ndarray, int, int], centre: np.ndarray) -> list[np.ndarray]:
+    """Every route ``along`` tries, shortest first: ``branch``'s segment up to its vertex v, then every
+    <= 1 cm straight to ``centre``, for each v."""
+    seg = np.asarray(branch[0], np.float64)
+    if len(seg) == 0:
+        return []
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(seg, axis=0), axis=1))])
+    length = arc + np.linalg.norm(seg - centre, axis=1)
+    out = []
+    for v in np.argsort(length, kind="stable"):
+        gap = float(np.linalg.norm(centre - seg[v]))
+        m = max(2, int(np.ceil(gap / 0.01)) + 1)
+        out.append(np.vstack([seg[:v], seg[v] + np.linspace(0.0, 1.0, m)[:, None] * (centre - seg[v])]))
+    return out

@@ -1,0 +1,100 @@
+"""A lobe split into many pieces leaves no secondary branch through another lobe (session 23, helper-162).
+
+On the leaf-on pine, 8 of 37 splits in 20 (one-point strokes at a k-means clustering of the lobe) left 3-12
+pieces each whose branch ran 2.4-3.5 cm deep (0.8 m scale) through a kept lobe round the trunk: no straight,
+bent or routed branch from the main branches reached them clear. Now such a piece's branch runs along the
+split lobe's own (which stayed clear) and turns off it to the piece (``tunnel.along``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+
+@pytest.fixture(scope="module")
+def leaf_on_pine():
+    from arboretum_server.decompose.options import DecomposeOptions
+    from arboretum_server.decompose.pipeline import decompose
+    from arboretum_server.decompose.report import CASES, grow_truth
+    from arboretum_server.decompose.toytree import toy_scan
+
+    truth = grow_truth("harmonic", "pine", 1)
+    pts, _ = toy_scan(truth, n=40000, noise=0.002 * float(np.ptp(truth.positions[:, 2])), seed=1,
+                      **CASES["leaf-on"])
+    return decompose(pts, DecomposeOptions(species="pine"))
+
+
+def _strokes(d, j: int, k: int) -> list[np.ndarray]:
+    """``k`` one-point strokes (output frame): the lobe's points nearest a k-means++ clustering of it."""
+    from scipy.cluster.vq import kmeans2
+    from scipy.spatial import cKDTree
+
+    own = d.points[d.lobes[j].members]
+    centres, _ = kmeans2(own, k, seed=100, minit="++")
+    pick = cKDTree(own).query(centres)[1]
+    assert len(set(pick.tolist())) == k
+    return [d.to_output(own[i])[None] for i in pick]
+
+
+@pytest.mark.parametrize("lobe", [3, 26])
+def test_a_split_in_20_adds_no_crossing(leaf_on_pine, lobe):
+    # Before: lobe 3 left 3 pieces crossing kept lobe 11 (3.4 cm deep), lobe 26 left 6.
+    from arboretum_server.decompose.clear import foreign
+    from arboretum_server.decompose.evaluate import crossings
+    from arboretum_server.decompose.refine import split_lobe
+
+    d = leaf_on_pine
+    assert crossings(d.hbl) == 0
+    out = split_lobe(d, lobe, _strokes(d, lobe, 20))
+    assert crossings(out.hbl) == 0
+    lobes = list(out.lobes)
+    assert not [j for j, lb in enumerate(lobes) if foreign(lobes, j, lb.segment, out.options.step / 2)]
+    pieces = lobes[len(d.lobes) - 1:]
+    assert len(pieces) == 20
+    assert np.array_equal(np.sort(np.concatenate([p.members for p in pieces])), np.sort(d.lobes[lobe].members))
+    for p in pieces:  # each piece's own branch, from a main-branch vertex to its centre (one of its points if moved)
+        assert np.allclose(p.segment[-1], p.centre)
+        assert np.allclose(p.segment[0], out.mains.segments[p.parent][p.parent_vertex])
+        own = out.points[p.members]
+        assert np.allclose(p.centre, own.mean(axis=0)) or np.linalg.norm(own - p.centre, axis=1).min() < 1e-12
+    assert [lb.branch for lb in out.hbl.lobes] == sorted({lb.branch for lb in out.hbl.lobes})
+
+
+def test_a_split_whose_pieces_no_route_clears_crossing_fewer(leaf_on_pine):
+    # Before: 5 pieces crossing kept lobe 11, 2.8 cm deep. One piece is still left: every route along the
+    # split lobe's branch enters a sibling piece (10-25 points: no closed carved shape) or a kept lobe.
+    from arboretum_server.decompose.evaluate import crossings
+    from arboretum_server.decompose.refine import split_lobe
+
+    out = split_lobe(leaf_on_pine, 22, _strokes(leaf_on_pine, 22, 20))
+    assert len(out.lobes) == len(leaf_on_pine.lobes) + 19
+    assert crossings(out.hbl) <= 1
+
+
+def test_a_split_with_no_crossing_piece_is_left_as_routed(leaf_on_pine, monkeypatch):
+    # The extra repair runs only for a piece still crossing: a clear split never reaches it.
+    from arboretum_server.decompose import refine
+
+    def refuse(*a, **k):
+        raise AssertionError("along called for a clear split")
+
+    monkeypatch.setattr(refine, "along", refuse)
+    out = refine.split_lobe(leaf_on_pine, 11, _strokes(leaf_on_pine, 11, 20))
+    assert len(out.lobes) == len(leaf_on_pine.lobes) + 19
+
+
+def test_along_routes_run_along_the_branch_then_straight_to_the_centre_shortest_first():
+    from arboretum_server.decompose.tunnel import _along_routes
+
+    seg = np.array([[0.0, 0, 0], [0, 0, 0.1], [0, 0, 0.2], [0, 0, 0.3]])
+    centre = np.array([0.05, 0, 0.2])
+    routes = _along_routes((seg, 0, 4), centre)
+    assert len(routes) == 4
+    lengths = [float(np.linalg.norm(np.diff(r, axis=0), axis=1).sum()) for r in routes]
+    assert lengths == sorted(lengths)
+    assert np.isclose(lengths[0], np.linalg.norm(centre))  # straight from the branch's start
+    assert np.isclose(lengths[-1], 0.3 + np.linalg.norm(centre - seg[3]))  # to its end, then back
+    for r in routes:
+        assert np.allclose(r[0], seg[0]) and np.allclose(r[-1], centre)
+        assert np.linalg.norm(np.diff(r, axis=0), axis=1).max() <= 0.1 + 1e-12
+    assert _along_routes((np.zeros((0, 3)), 0, 0), centre) == []
