@@ -81,6 +81,20 @@ height or more, is looked past first (``_apart_below``): a clump of 2 % of scan 
 height under its ground hid its columns, and a strip of 4 % was taken for it (the root 3.3 and 3.2 m
 low)."""
 
+GROUND_NARROW = 64
+"""A cloud sampled by fewer columns than this (``GROUND_CELL``) is searched once more by fewer held
+points (``_narrow_surface``): scan 10, 2.4 m wide (41-49 columns), thinned to 4,000 points with 10-20 %
+uniform outliers, held 19 columns, too few to fit, and had no ground (the root 2.6-4.9 % of the height
+low). Scan 07 (97-131 columns, no ground) spent 11 ms there with 200."""
+GROUND_HELD_FEW = (2, 1)
+"""``_narrow_surface``'s held counts, tried in turn."""
+GROUND_MIRROR = 0.75
+"""``_mirrored``: at least this share of the points under a ground land on the cloud above it when
+mirrored in it, for them to be taken for the tree's mirror (multipath)."""
+GROUND_MIRROR_LOW = 0.4
+"""``_mirror_surface`` searches again among the points above this fraction of the span (the mirror's
+half of it set aside)."""
+
 
 def _spread(q: np.ndarray) -> float:
     """Median plan-view distance of ``q`` (M, 3) from its median; inf for fewer than 5 points."""
@@ -282,9 +296,92 @@ def _search(pts: np.ndarray, band_frac: float) -> Found:
     found, sparse = _surface(pts, body[order[first]], band_frac, inside, h)
     if found[1] is None:
         found = _held_surface(pts, body, order, first, band_frac, lo, hi)
+    if found[1] is None and sparse is None:  # no surface refused only for its share: maybe a mirror
+        found = _mirror_surface(pts, body[order[first]], band_frac, inside, lo, hi)
+    if found[1] is None and first.sum() < GROUND_NARROW:
+        found = _narrow_surface(pts, body, band_frac, lo, hi)
     if found[1] is None and sparse is not None:  # no ground but maybe the sparse floor of strays under the tree
         found = sparse
     return found
+
+
+def _mirror_surface(pts: np.ndarray, low: np.ndarray, band_frac: float, inside: np.ndarray, lo: float,
+                    hi: float) -> Found:
+    """``find_ground``'s third try, for a tree mirrored under its ground (multipath off wet ground or a
+    puddle: a share of all its points, crown and trunk, at z -> 2 z_ground - z): each surface through the
+    column minima ``low`` (M, 3), then through those of the points in the upper ``1 - GROUND_MIRROR_LOW``
+    of ``lo`` to ``hi`` (the mirror stretches the span down about as far as the tree stands above its
+    ground, and its minima under a small ground hide it), is cut (``_cut``) with the points under it that
+    it mirrors onto the cloud not counted below it (``_mirrored``). Scan 10 and a eucalyptus with 0.2-3 %
+    of their points mirrored had no ground (12 of 110 clouds): the first's 16 columns were too few to fit
+    a plane to, the second's mirror held 2 % of its points under its ground. Not tried when more than
+    ``GROUND_APART`` of the points lie in the lowest third of the span: a mirror reaching half as deep
+    as the tree stands tall (``_mirrored``) holds only its own few points there (a tree with no ground
+    spent 80 ms here, scan 07)."""
+    none = np.zeros(len(pts), bool), None
+    h = hi - lo
+    if (pts[:, 2] < lo + h / 3).mean() > GROUND_APART:  # a mirror half as deep as the tree: its third, sparse
+        return none
+    top = lo + GROUND_MIRROR_LOW * h
+    upper = pts[(pts[:, 2] >= top) & (pts[:, 2] <= hi)]
+    order, first = _columns_low_first(upper[:, :2], upper[:, 2], GROUND_CELL * (hi - top))
+    for sample, scale in ((low, h), (upper[order[first]], hi - top)):
+        for ground, under in _candidates(pts, sample, band_frac, scale):
+            counted = ~_mirrored(pts, under, band_frac * scale / 2)
+            if counted.all():
+                continue
+            cut = _cut(pts, under, band_frac, inside, counted)
+            if cut is not None and cut[1]:
+                return cut[0], ground
+    return none
+
+
+def _narrow_surface(pts: np.ndarray, body: np.ndarray, band_frac: float, lo: float, hi: float) -> Found:
+    """``find_ground``'s last held try, on a narrow cloud (under ``GROUND_NARROW`` columns) with many
+    scattered points (``_many_scattered``): ``_held_at`` with each of ``GROUND_HELD_FEW`` points held,
+    in columns as wide as ``GROUND_CELL`` of the span, then half that, over the span of the points with
+    each of those counts held in columns half as wide, when they lie a column width or more above the
+    cloud's floor ``lo`` (``body``: the points of ``pts`` within ``lo`` to ``hi``). A thinned cloud's
+    ground has too few points to hold ``GROUND_HELD`` in 20 columns."""
+    none = np.zeros(len(pts), bool), None
+    cell = GROUND_CELL * (hi - lo)
+    order, first = _columns_low_first(body[:, :2], body[:, 2], cell / 2)
+    spans = [_held_span(body, order, first, band_frac, lo, hi, k) for k in GROUND_HELD_FEW]
+    if all(span is None or span[0] - lo < cell for span in spans) or not _many_scattered(pts):
+        return none  # nothing strewn under the held points, or no outliers to hold
+    for span in spans:
+        if span is None or span[0] - lo < cell:
+            continue
+        for k in GROUND_HELD_FEW:  # the span of the points with more held, searched with fewer held too
+            for wide in (GROUND_CELL, GROUND_CELL / 2):  # the held span's own columns, then half as wide
+                found = _held_at(pts, span, band_frac, k, wide)
+                if found[1] is not None:
+                    return found
+    return none
+
+
+def _mirrored(pts: np.ndarray, under: np.ndarray, tol: float) -> np.ndarray:
+    """(N,) bool: the points of ``pts`` (N, 3) more than ``tol`` below their ground heights ``under`` (N,)
+    that, mirrored in it, land within ``tol`` of a point above it, when at least ``GROUND_MIRROR`` of
+    those below do, spread at least half as wide as those above and reach at least half as deep as those
+    stand tall (a tree's mirror, not a trunk going on under a crown's underside, which mirrors onto
+    itself, nor the foot of a dense leafy tree with no ground, which lands on its like, nor outliers
+    strewn under a ground); else none."""
+    from scipy.spatial import cKDTree
+
+    up = pts[:, 2] - under
+    below, above = np.flatnonzero(up < -tol), np.flatnonzero(up > tol)
+    none = np.zeros(len(pts), bool)
+    if len(below) < 10 or len(above) < 10 or -up[below].min() < 0.5 * up[above].max():
+        return none
+    image = pts[below] * [1, 1, -1] + np.c_[np.zeros((len(below), 2)), 2 * under[below]]
+    dist, _ = cKDTree(pts[above]).query(image, distance_upper_bound=tol)
+    land = below[dist <= tol]
+    if len(land) < GROUND_MIRROR * len(below) or _spread(pts[land]) < 0.5 * _spread(pts[above]) \
+            or -up[land].min() < 0.5 * up[above].max():
+        return none
+    none[land] = True
+    return none
 
 
 def _held_surface(pts: np.ndarray, body: np.ndarray, order: np.ndarray, first: np.ndarray, band_frac: float,
@@ -337,16 +434,17 @@ def _held_span(body: np.ndarray, order: np.ndarray, first: np.ndarray, band_frac
     return body_span(body[order, 2]) if first.sum() >= 20 else None  # the outliers' few held points aside
 
 
-def _held_at(pts: np.ndarray, span: tuple[float, float], band_frac: float, k: int) -> Found:
+def _held_at(pts: np.ndarray, span: tuple[float, float], band_frac: float, k: int,
+             cell: float = GROUND_CELL) -> Found:
     """``_surface`` through the lowest point of each column of ``pts`` (N, 3) within ``span`` (``lo``,
     ``hi``: ``_held_span``'s) that has ``k`` more of its column just above it (``held``), only such
     points counted below the ground (``_cut``: outliers strewn under it are no trunk under a crown's
-    underside); or no points and None."""
+    underside); or no points and None. ``cell``: the columns' width, a fraction of the span's height."""
     lo, hi = span
     h = hi - lo
     inside = (pts[:, 2] >= lo) & (pts[:, 2] <= hi)
     body = pts[inside]
-    order, first = _columns_low_first(body[:, :2], body[:, 2], GROUND_CELL * h)
+    order, first = _columns_low_first(body[:, :2], body[:, 2], cell * h)
     order, first = held(body[:, 2], order, first, band_frac * h / 2, k)
     if first.sum() < 20:
         return np.zeros(len(pts), bool), None
