@@ -229,7 +229,8 @@ def _upside_down(pts: np.ndarray, flipped: np.ndarray, axis: int, grounds: tuple
     a wall beside a tree is found from both ends), and a trunk stands on it: the narrowest
     ``_foot_widths`` slice next to it under ``TRUNK_NARROW`` (grass, slopes and occlusion allowed; a
     palm's or an umbrella pine's flat crown top read from above is a smooth, gentle surface too, with
-    crown under it). Where no trunk shows (a shrub, a tree with a pole, a skirt of branches), ground
+    crown under it: ground that turns a file lies near one plane, ``_planar``, or on terraces,
+    ``_terraced``). Where no trunk shows (a shrub, a tree with a pole, a skirt of branches), ground
     reaching ``GROUND_WIDE`` times farther out than the rest along both axes across does (a wall's face,
     long but lower than the tree, does not). Without ground the file is read as written: a trunk-like
     top is also a conifer's bare leader, a dead top or a pole beside the tree (helper-136: that rule
@@ -238,7 +239,7 @@ def _upside_down(pts: np.ndarray, flipped: np.ndarray, axis: int, grounds: tuple
     if not (under[1] < GROUND_UNDER <= under[0]):  # a wall found as ground from both ends: no way up
         return False
     rest = flipped[~grounds[1]]
-    if len(rest) == 0 or not _planar(flipped, axis, grounds[1]):  # a crown's dome seen from above
+    if len(rest) == 0 or not (_planar(flipped, axis, grounds[1]) or _terraced(flipped, axis)):  # a crown's dome
         return False
     if _foot_widths(rest, axis).min() < TRUNK_NARROW:
         return True
@@ -274,6 +275,15 @@ def _planar(pts: np.ndarray, axis: int, ground: np.ndarray) -> bool:
         off = np.abs(height - design @ fit)
         fit_to = off <= np.percentile(off, 75)
     return bool(np.percentile(off, 100 * PLANE_SHARE) <= GROUND_PLANE * float(np.ptp(pts[:, axis])))
+
+
+def _terraced(pts: np.ndarray, axis: int) -> bool:
+    """Whether the ground under ``pts`` (N, 3) along +``axis`` has terrace edges or a flight of steps:
+    ``ground_band`` left out an upper level in ``STEP_COLUMNS`` columns or more (``_steps``, ``_flight``).
+    Such ground is no plane but several levels (a flight of 8 steps of 5 % of the height joins two 0.4
+    heights apart), and ``_planar`` kept its upside-down files as written. Only run for ground at the top
+    end of an axis with a trunk on it."""
+    return _band(pts, axis)[1] >= STEP_COLUMNS
 
 
 def trunk_on_top(points: np.ndarray, guess: UpGuess | None = None) -> bool:
@@ -354,36 +364,45 @@ def ground_band(pts: np.ndarray, axis: int) -> np.ndarray | None:
     ``GROUND_SHARE`` of the columns are ground, the band left out is the points less than
     ``GROUND_BAND`` of the extent above their column's lowest point (the surface's, for a column whose
     lowest point is far above it), and up to the first 1 % slice above that is half as wide as the band
-    (a trunk rising through grass). In a column across a terrace's edge, the upper level's band is left
-    out too (``_steps``, ``_upper_level``; session 22). Session 18: one plane found by RANSAC missed
-    ground that curved by 4 % of the height, and the tree was turned on its side. Session 20: multipath
-    under the ground became the lowest point of too many columns and hid it (a tree turned Y up at
-    0.91); it is left out first (``GROUND_PASSES``) and lies in the band. Session 22: hummocky ground
-    (bumps of 3 % of the height, 0.1-0.2 heights apart) is neither, and the tree was turned on its side
-    (Y at 0.95): it is found on a coarser grid (``_rough_ground``) and its relief is in the band.
+    (a trunk rising through grass). In a column across a terrace's edge or a flight of steps, the upper
+    level's band is left out too (``_steps``, ``_upper_level``; sessions 22-23). Session 18: one plane
+    found by RANSAC missed ground that curved by 4 % of the height, and the tree was turned on its side.
+    Session 20: multipath under the ground became the lowest point of too many columns and hid it (a
+    tree turned Y up at 0.91); it is left out first (``GROUND_PASSES``) and lies in the band. Session 22:
+    hummocky ground (bumps of 3 % of the height, 0.1-0.2 heights apart) is neither, and the tree was
+    turned on its side (Y at 0.95): it is found on a coarser grid (``_rough_ground``) and its relief is in
+    the band.
     """
+    return _band(pts, axis)[0]
+
+
+def _band(pts: np.ndarray, axis: int) -> tuple[np.ndarray | None, int]:
+    """``ground_band`` and the number of columns whose upper level it left out (``_steps``)."""
     h = pts[:, axis]
     lo, hi = np.percentile(h, [0.5, 99.5])
     height = float(hi - lo)
     across = np.delete(pts, axis, axis=1)
     cell = _largest_extent(pts) / GROUND_CELLS
     if height <= 0 or cell <= 0:
-        return None
+        return None, 0
     column, shape = _columns(across, cell)
     if min(shape) < 3:
-        return None
+        return None, 0
     found, low, surface = _ground_surface(h, column, shape, cell, height)
     rough = not found and _rough_ground(low, cell, height)
     if not (found or rough):
-        return None
-    with np.errstate(invalid="ignore"):
-        base = np.where(np.isfinite(surface) & ~(np.abs(low - surface) < 0.1 * height), surface, low)
+        return None, 0
+    base = _base(low, surface, height)
     up = h - base.ravel()[column]
     top = _grass_top(up, across, height)
     band = up < top + (_relief(up, column, low.size, height) if rough else 0.0)
-    for rise in _steps(low, surface, base, height):  # the upper level in a column across a terrace's edge
-        band |= _upper_level(up, column, rise.ravel(), height)
-    return band
+    stepped = np.zeros(low.size, dtype=bool)
+    rises = [(rise, False) for rise in _steps(low, surface, base, height)]  # the upper level across an edge
+    for rise, flight in rises + [(rise, True) for rise in _flight(low, surface, base, height)]:
+        upper = _upper_level(up, column, rise.ravel(), height, flight)
+        band |= upper
+        stepped[column[upper]] = True
+    return band, int(stepped.sum())
 
 
 ROUGH_CELLS, ROUGH_TOL, ROUGH_SHARE, ROUGH_FILL = 2, 0.05, 0.8, 0.6
@@ -436,19 +455,32 @@ def _relief(up: np.ndarray, column: np.ndarray, count: int, height: float) -> np
     return np.where(high <= cap, high + 1e-9 * height, under_crown)[column]
 
 
-def _upper_level(up: np.ndarray, column: np.ndarray, rise: np.ndarray, height: float) -> np.ndarray:
+def _upper_level(up: np.ndarray, column: np.ndarray, rise: np.ndarray, height: float,
+                 flight: bool = False) -> np.ndarray:
     """(N,) bool: the points of a column across a terrace's edge (``rise``: per column, 0 for none; ``up``:
     each point's height over its column's ground) within ``GROUND_BAND`` over the upper level, in columns
     whose next band up holds under a tenth as many points: nothing stands on the level there. A trunk on
     the edge does, and keeps its foot (taken, scan 06's band held 458 of its points instead of 159, and
-    the guiding default tree's trunk slice moved up into its crown: Z at 0.70 became Y at 0.81)."""
+    the guiding default tree's trunk slice moved up into its crown: Z at 0.70 became Y at 0.81). A
+    ``flight``'s upper tread is taken only where the column holds under a tenth as many points between
+    half a band and the tread: a tread over a tread, not a smooth slope."""
     r = rise[column]
     band = GROUND_BAND * height
     level = (r > 0) & (up >= r - GROUND_TOL * height) & (up < r + band)
     above = (r > 0) & (up >= r + band) & (up < r + 2.0 * band)
     count = len(rise)
     free = 10 * np.bincount(column[above], minlength=count) < np.bincount(column[level], minlength=count)
+    if flight:  # a tread over a tread, nothing between: a smooth steep slope (a crown's side) fills it
+        between = (r > 0) & (up >= 0.5 * band) & (up < r - GROUND_TOL * height)
+        free &= 10 * np.bincount(column[between], minlength=count) < np.bincount(column[level], minlength=count)
     return level & free[column]
+
+
+def _base(low: np.ndarray, surface: np.ndarray, height: float) -> np.ndarray:
+    """Each column's ground (``ground_band``'s grid): its lowest point, or the surface where that is more
+    than a tenth of ``height`` off it (a crown's underside over the ground)."""
+    with np.errstate(invalid="ignore"):
+        return np.where(np.isfinite(surface) & ~(np.abs(low - surface) < 0.1 * height), surface, low)
 
 
 def _columns(across: np.ndarray, cell: float) -> tuple[np.ndarray, tuple[int, int]]:
@@ -511,10 +543,11 @@ def _median3(grid: np.ndarray) -> np.ndarray:
 GROUND_STEP, STEP_COLUMNS, STEP_ON = 0.15, 20, 0.95
 """A terrace's edge (``_steps``): a neighbouring column's ground more than ``GROUND_BAND`` and at most this
 fraction of the extent above a column's own, level with the neighbour opposite (a step of 10 % of a
-tree's height is 0.106 of scan 06's extent); terraces have at least this many such columns (an edge
-runs across the ground) and at least this share of the occupied columns on the surface (real ground
-under a tree: 0.999-1.0; a tree's or a wall's side taken for ground: 0.66-0.90, whose few rises moved
-wall-sweep confidences by up to 0.09; a trunk's column on a 15-45 % slope: 1-4 columns)."""
+tree's height is 0.106 of scan 06's extent; a flight's neighbour opposite is lower by at most as much);
+terraces (and flights) have at least this many such columns (an edge runs across the ground) and at
+least this share of the occupied columns on the surface (real ground under a tree: 0.999-1.0; a tree's
+or a wall's side taken for ground: 0.66-0.90, whose few rises moved wall-sweep confidences by up to
+0.09; a trunk's column on a 15-45 % slope: 1-4 columns)."""
 
 
 def _steps(low: np.ndarray, surface: np.ndarray, base: np.ndarray, height: float) -> tuple:
@@ -526,24 +559,56 @@ def _steps(low: np.ndarray, surface: np.ndarray, base: np.ndarray, height: float
     the upper level in (a step of 6 % of the height against a band of 3 %), which widened the trunk's
     slice from 0.37 m to 14-15 m and left Z unsure (0.52-0.61, session 21). Only the upper level is left
     out, not the height between: a trunk standing on the edge keeps its foot (leaving out the column up
-    to the upper band took it, and Z fell from 0.98 to 0.58)."""
-    with np.errstate(invalid="ignore"):
-        level = np.where(np.abs(low - surface) < GROUND_TOL * height, low, np.nan)
-    if np.isfinite(level).sum() < STEP_ON * np.isfinite(low).sum():
-        return ()
-    pad = np.pad(level, 1, constant_values=np.nan)
-    rows, cols = base.shape
+    to the upper band took it, and Z fell from 0.98 to 0.58). A flight of steps is ``_flight``'s."""
     lowest, highest = np.full(base.shape, np.inf), np.zeros(base.shape)
-    with np.errstate(invalid="ignore"):  # NaN: an empty column
-        for i, j in ((i, j) for i in range(3) for j in range(3) if (i, j) != (1, 1)):
-            d = pad[i:i + rows, j:j + cols] - base
-            level_across = np.abs(pad[2 - i:2 - i + rows, 2 - j:2 - j + cols] - base) < GROUND_TOL * height
-            step = (d > GROUND_BAND * height) & (d <= GROUND_STEP * height) & level_across
-            lowest = np.where(step, np.minimum(lowest, d), lowest)
-            highest = np.where(step, np.maximum(highest, d), highest)
+    for d, across in _rises(low, surface, base, height):
+        with np.errstate(invalid="ignore"):  # NaN: no rise, or an empty column
+            step = np.isfinite(d) & (np.abs(across) < GROUND_TOL * height)
+        lowest = np.where(step, np.minimum(lowest, d), lowest)
+        highest = np.where(step, np.maximum(highest, d), highest)
     if (highest > 0).sum() < STEP_COLUMNS:
         return ()
     return np.where(np.isfinite(lowest), lowest, 0.0), highest
+
+
+def _flight(low: np.ndarray, surface: np.ndarray, base: np.ndarray, height: float) -> tuple:
+    """The rises of a flight of steps on ``ground_band``'s grid: for each column, the lowest rise of
+    ``_steps``' kind whose neighbour opposite is lower instead of level, by at most ``GROUND_STEP`` (0:
+    none), as a 1-tuple; () when fewer than ``STEP_COLUMNS`` columns have one. Where the treads are a
+    column deep, each column holds two and the neighbour opposite is a step lower: ``_steps`` found no
+    edge, the upper treads were scored as the foot (its slice 2.9 heights wide) and Z read 0.54-0.72
+    (helper-154's stairs of 5 %: 31 of 40 files wrong until session 23, 2 now, the guiding default
+    preset's Y files, unsure on flat ground too). A smooth slope steeper than a band a column rises the
+    same way, so ``_upper_level`` takes a flight's tread only over a gap (taken like a terrace's, a
+    crown's flank seen from below lost its upper levels, and 7 of helper-136's upside-down files were
+    kept as written)."""
+    lowest = np.full(base.shape, np.inf)
+    for d, across in _rises(low, surface, base, height):
+        with np.errstate(invalid="ignore"):
+            down = np.isfinite(d) & (across <= -GROUND_TOL * height) & (across >= -GROUND_STEP * height)
+        lowest = np.where(down, np.minimum(lowest, d), lowest)
+    found = np.isfinite(lowest)
+    return (np.where(found, lowest, 0.0),) if found.sum() >= STEP_COLUMNS else ()
+
+
+def _rises(low: np.ndarray, surface: np.ndarray, base: np.ndarray, height: float) -> list:
+    """For each of a column's 8 neighbours on ``ground_band``'s grid, (its ground over the column's
+    ``base`` where it rises more than ``GROUND_BAND`` and at most ``GROUND_STEP`` of ``height``, else NaN;
+    the neighbour opposite's ground over it); [] unless ``STEP_ON`` of the occupied columns have their
+    lowest point within ``GROUND_TOL`` of their 3 x 3 median (that point is a column's ground here)."""
+    with np.errstate(invalid="ignore"):
+        level = np.where(np.abs(low - surface) < GROUND_TOL * height, low, np.nan)
+    if np.isfinite(level).sum() < STEP_ON * np.isfinite(low).sum():
+        return []
+    pad = np.pad(level, 1, constant_values=np.nan)
+    rows, cols = base.shape
+    out = []
+    with np.errstate(invalid="ignore"):  # NaN: an empty column
+        for i, j in ((i, j) for i in range(3) for j in range(3) if (i, j) != (1, 1)):
+            d = pad[i:i + rows, j:j + cols] - base
+            d = np.where((d > GROUND_BAND * height) & (d <= GROUND_STEP * height), d, np.nan)
+            out.append((d, pad[2 - i:2 - i + rows, 2 - j:2 - j + cols] - base))
+    return out
 
 
 def _grass_top(up: np.ndarray, across: np.ndarray, height: float) -> float:
