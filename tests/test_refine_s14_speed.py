@@ -126,6 +126,12 @@ def _run_counted(monkeypatch, fn, reference: bool) -> tuple[object, int, int]:
                 return _reference_blocked(lobes, j, a, b, step, box, tests)
 
             m.setattr(clear, "blocked", blocked)
+
+            def first_clear(lobes, j, a, b, step, box):  # session 23: the repairs' first-clear calls
+                bad = _reference_blocked(lobes, j, a, b, step, box, tests)
+                return -1 if bad.all() else int(np.argmin(bad))
+
+            m.setattr(clear, "first_clear", first_clear)
             m.setattr(carve, "_carved", lambda members, pts: {})
         clear.WORK["hull_tests"] = 0
         out = fn()

@@ -16,6 +16,7 @@ inside one (session 14: the same answers as testing every sample lobe by lobe, a
 from __future__ import annotations
 
 import threading
+import weakref
 from collections import OrderedDict
 from operator import attrgetter
 
@@ -92,27 +93,51 @@ def foreign(lobes: list[LobeState], j: int, seg: np.ndarray, tol: float,
     return bool(inside_foreign(lobes, j, resample_step(seg, tol), box).any())
 
 
+_MAIN_VERTICES = ArrayMemo()
+"""``main_vertices`` by the first main segment's array, with the segments it was computed for: the repairs
+ask for it hundreds of times per refinement (a BranchSet's arrays are replaced, never changed in place)."""
+
+
 def main_vertices(mains: BranchSet) -> tuple[np.ndarray, np.ndarray]:
-    """Every main-branch vertex (V, 3) and its (segment, vertex index) (V, 2)."""
-    owner = np.concatenate([np.stack([np.full(len(s), b), np.arange(len(s))], 1) for b, s in enumerate(mains.segments)])
-    return np.concatenate(mains.segments), owner
+    """Every main-branch vertex (V, 3) and its (segment, vertex index) (V, 2) (read only: shared)."""
+    segs = mains.segments
+    hit = _MAIN_VERTICES.get(segs[0]) if segs else None
+    if hit is not None and len(hit[0]) == len(segs) and all(w() is a for w, a in zip(hit[0], segs)):
+        return hit[1]
+    owner = np.concatenate([np.stack([np.full(len(s), b), np.arange(len(s))], 1) for b, s in enumerate(segs)])
+    out = (np.concatenate(segs), owner)
+    for a in out:
+        a.flags.writeable = False
+    if segs:
+        _MAIN_VERTICES.put(segs[0], ([weakref.ref(a) for a in segs], out))
+    return out
 
 
 def straight_fallback(lobes: list[LobeState], j: int, mains: BranchSet, tries: int = 64,
-                      step: float = 0.005, batch: int = 8) -> tuple[np.ndarray, int, int] | None:
+                      step: float = 0.005) -> tuple[np.ndarray, int, int] | None:
     """A straight secondary branch for lobe ``j`` from the nearest main-branch vertex whose segment to the
-    lobe centre stays out of foreign lobes (candidates tested ``batch`` at a time, nearest first), or None."""
-    centre = lobes[j].centre
+    lobe centre stays out of foreign lobes (candidates tested nearest first, up to the first clear one), or
+    None."""
+    found = straight_from(lobes, j, lobes[j].centre[None], mains, tries, step)
+    return None if found is None else found[1]
+
+
+def straight_from(lobes: list[LobeState], j: int, centres: np.ndarray, mains: BranchSet, tries: int = 64,
+                  step: float = 0.005) -> tuple[int, tuple[np.ndarray, int, int]] | None:
+    """(k, branch): the first of the ``centres`` (C, 3) that ``straight_fallback`` reaches with a straight
+    branch were it lobe ``j``'s centre (its hull unchanged), and that branch; None if none is reached. One
+    ``first_clear`` call over every (centre, vertex) pair in that order: before session 23 a ``blocked`` call
+    per 8 vertices of each centre (``tunnel.moved_centre`` tries up to 32 centres)."""
     verts, owner = main_vertices(mains)
-    order = _nearest_vertices(verts, centre, tries)
-    box = boxes(lobes)
-    for start in range(0, len(order), batch):
-        cand = order[start : start + batch]
-        bad = blocked(lobes, j, verts[cand], np.broadcast_to(centre, (len(cand), 3)), step, box)
-        if not bad.all():
-            i = int(cand[int(np.argmin(bad))])
-            return _straight(verts[i], centre, owner[i])
-    return None
+    orders = [_nearest_vertices(verts, c, tries) for c in centres]
+    if not sum(map(len, orders)):
+        return None
+    which = np.repeat(np.arange(len(centres)), [len(o) for o in orders])
+    cand = np.concatenate(orders)
+    k = first_clear(lobes, j, verts[cand], centres[which], step, boxes(lobes))
+    if k < 0:
+        return None
+    return int(which[k]), _straight(verts[cand[k]], centres[which[k]], owner[cand[k]])
 
 
 def straight_routes(lobes: list[LobeState], j: int, mains: BranchSet, tries: int = 64,
@@ -152,6 +177,16 @@ def blocked(lobes: list[LobeState], j: int, a: np.ndarray, b: np.ndarray, step: 
     return bad
 
 
+def first_clear(lobes: list[LobeState], j: int, a: np.ndarray, b: np.ndarray, step: float,
+                box: tuple[np.ndarray, np.ndarray]) -> int:
+    """The first i whose segment a[i] -> b[i] ``blocked`` finds clear, -1 for none; the segments after it
+    are not tried."""
+    counts = _sample_counts(a, b, step)
+    bad, tests = segments_blocked(_packed(lobes)[0], box[0], box[1], j, a, b, counts, until_clear=True)
+    WORK["hull_tests"] += tests
+    return -1 if bad.all() else int(np.argmin(bad))
+
+
 def _sample_counts(a: np.ndarray, b: np.ndarray, step: float) -> np.ndarray:
     """(S,) samples every ~``step`` along the segments a[i] -> b[i], both ends included (at least 2)."""
     return np.maximum(2, np.ceil(np.linalg.norm(b - a, axis=1) / step).astype(int) + 1)
@@ -176,7 +211,9 @@ def bent_fallback(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndar
     lobe centre, both pieces clear of foreign lobes, through every (n // ``waypoints``)-th of the lobe's
     n points whose segment to the centre is clear. The ``tries`` main vertices nearest the centre that
     lie outside every foreign lobe are tested ``batch`` at a time, nearest first; the first batch with a
-    clear route gives the shortest one. None if none has one. For lobes that no straight segment reaches (lobes around a pine's trunk)."""
+    clear route gives the shortest one. None if none has one. For lobes that no straight segment reaches
+    (lobes around a pine's trunk). The pairs are tested in one ``first_clear`` call up to the first clear one,
+    then its batch in full (before session 23: a ``blocked`` call per batch, up to 24)."""
     centre, box = lobes[j].centre, boxes(lobes)
     members = pts[lobes[j].members]
     w = members[:: max(1, len(members) // waypoints)]
@@ -186,15 +223,16 @@ def bent_fallback(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndar
     verts, owner = main_vertices(mains)
     order = np.argsort(np.linalg.norm(verts - centre, axis=1))
     order = order[~inside_foreign(lobes, j, verts[order], box)][:tries]  # a start in a foreign lobe fails
-    for start in range(0, len(order), batch):
-        v = np.repeat(order[start : start + batch], len(w))  # every (vertex, waypoint) pair of the batch
-        ww = np.tile(w, (len(v) // len(w), 1))
-        bad = blocked(lobes, j, verts[v], ww, step, box)
-        if bad.all():
-            continue
-        length = np.where(bad, np.inf, np.linalg.norm(ww - verts[v], axis=1) + np.linalg.norm(ww - centre, axis=1))
-        k = int(np.argmin(length))
-        a, b = verts[v[k]], ww[k]
-        seg = np.vstack([resample_step(np.stack([a, b]), 0.01), resample_step(np.stack([b, centre]), 0.01)[1:]])
-        return seg, int(owner[v[k], 0]), int(owner[v[k], 1])
-    return None
+    v = np.repeat(order, len(w))  # every (vertex, waypoint) pair, batch after batch
+    ww = np.tile(w, (len(order), 1))
+    first = first_clear(lobes, j, verts[v], ww, step, box)  # its batch is the first with a clear pair
+    if first < 0:
+        return None
+    size = batch * len(w)
+    v, ww = v[first // size * size:][:size], ww[first // size * size:][:size]
+    bad = blocked(lobes, j, verts[v], ww, step, box)
+    length = np.where(bad, np.inf, np.linalg.norm(ww - verts[v], axis=1) + np.linalg.norm(ww - centre, axis=1))
+    k = int(np.argmin(length))
+    a, b = verts[v[k]], ww[k]
+    seg = np.vstack([resample_step(np.stack([a, b]), 0.01), resample_step(np.stack([b, centre]), 0.01)[1:]])
+    return seg, int(owner[v[k], 0]), int(owner[v[k], 1])

@@ -322,18 +322,26 @@ def _crossings_of(v, f, t0, t1, flo, fhi, ftop, x, y, z) -> int:  # pragma: no c
     total = 0
     for t in range(t0, t1):
         if x < flo[t, 0] or x > fhi[t, 0] or y < flo[t, 1] or y > fhi[t, 1] or z > ftop[t]:
-            continue
-        a, b, c = f[t, 0], f[t, 1], f[t, 2]
-        s0 = _side(v, b, c, x, y)
-        if _side(v, c, a, x, y) != s0 or _side(v, a, b, x, y) != s0:
-            continue
-        w0 = (v[c, 0] - v[b, 0]) * (y - v[b, 1]) - (v[c, 1] - v[b, 1]) * (x - v[b, 0])
-        w1 = (v[a, 0] - v[c, 0]) * (y - v[c, 1]) - (v[a, 1] - v[c, 1]) * (x - v[c, 0])
-        w2 = (v[b, 0] - v[a, 0]) * (y - v[a, 1]) - (v[b, 1] - v[a, 1]) * (x - v[a, 0])
-        w = w0 + w1 + w2
-        if w != 0.0 and (w0 * v[a, 2] + w1 * v[b, 2] + w2 * v[c, 2]) / w > z:
-            total += s0
+            continue  # tested here, not in the call: most faces miss, and the call costs more than the test
+        total += face_crossing(v, f, t, x, y, z)
     return total
+
+
+@njit(cache=True)
+def face_crossing(v, f, t, x, y, z) -> int:  # pragma: no cover - numba
+    """+1 / -1 when the ray up from (x, y, z) crosses face ``t`` (its sign by the face's winding), else 0, for
+    a point inside the face's XY box and not above its top (the callers' cheap test first)."""
+    a, b, c = f[t, 0], f[t, 1], f[t, 2]
+    s0 = _side(v, b, c, x, y)
+    if _side(v, c, a, x, y) != s0 or _side(v, a, b, x, y) != s0:
+        return 0
+    w0 = (v[c, 0] - v[b, 0]) * (y - v[b, 1]) - (v[c, 1] - v[b, 1]) * (x - v[b, 0])
+    w1 = (v[a, 0] - v[c, 0]) * (y - v[c, 1]) - (v[a, 1] - v[c, 1]) * (x - v[c, 0])
+    w2 = (v[b, 0] - v[a, 0]) * (y - v[a, 1]) - (v[b, 1] - v[a, 1]) * (x - v[a, 0])
+    w = w0 + w1 + w2
+    if w != 0.0 and (w0 * v[a, 2] + w1 * v[b, 2] + w2 * v[c, 2]) / w > z:
+        return s0
+    return 0
 
 
 @njit(cache=True)

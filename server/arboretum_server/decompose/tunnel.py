@@ -19,7 +19,7 @@ from .clear import (
     boxes,
     foreign,
     inside_foreign,
-    straight_fallback,
+    straight_from,
     straight_routes,
 )
 from .lobes import inside
@@ -135,13 +135,11 @@ def moved_centre(lobes: list[LobeState], j: int, pts: np.ndarray, mains: BranchS
     own = pts[lobes[j].members]
     own = own[np.argsort(np.linalg.norm(own - lobes[j].centre, axis=1), kind="stable")]
     own = own[:: max(1, len(own) // tries)]
-    for c in own[~inside_foreign(lobes, j, own)]:
-        trial = list(lobes)
-        trial[j] = replace(lobes[j], centre=c)
-        route = straight_fallback(trial, j, mains)
-        if route is not None:
-            lobes[j] = replace(trial[j], segment=route[0], parent=route[1], parent_vertex=route[2])
-            return
+    own = own[~inside_foreign(lobes, j, own)]
+    found = straight_from(lobes, j, own, mains)  # the first of them that a straight branch reaches
+    if found is not None:
+        route = found[1]
+        lobes[j] = replace(lobes[j], centre=own[found[0]], segment=route[0], parent=route[1], parent_vertex=route[2])
 
 
 def entered(before: list[LobeState], after: list[LobeState], changed: list[int], tol: float) -> bool:
