@@ -114,7 +114,8 @@ def _slowest_refine_rows() -> list[Row]:
     slow tail: merges of lobes eight apart (j, j + 8 for even j: the merged lobe wraps the trunk and
     swallows kept branches; it gives way to them, in several closed pieces if need be), and "around"
     inserts (lobe j's points within 0.35 of its extent round its centre, even j: the selection takes
-    points from many lobes, each rebuilt and most routed again)."""
+    points from many lobes, each rebuilt and most routed again), and splits of ``SPLIT_LOBES`` in 20
+    (``_twenty_strokes``: dozens of pieces packed into one lobe's place, the inner ones repaired)."""
     from arboretum_server.decompose import refine
     from arboretum_server.decompose.options import DecomposeOptions
     from arboretum_server.decompose.pipeline import decompose
@@ -133,7 +134,8 @@ def _slowest_refine_rows() -> list[Row]:
         return inlobe[np.linalg.norm(d.points[inlobe] - lb.centre, axis=1) < 0.35 * extent]
 
     sets = {"merges (j, j + 8)": {j: lambda j=j: refine.merge_lobes(d, [j, (j + 8) % n]) for j in range(0, n, 2)},
-            '"around" inserts': {j: lambda sel=around(j): refine.insert_lobe(d, sel) for j in range(0, n, 2)}}
+            '"around" inserts': {j: lambda sel=around(j): refine.insert_lobe(d, sel) for j in range(0, n, 2)},
+            "splits in 20": {j: lambda j=j, s=_twenty_strokes(d, j): refine.split_lobe(d, j, s) for j in SPLIT_LOBES}}
     rows = []
     for name, ops in sets.items():
         times = {j: median_time(fn, runs=3) for j, fn in ops.items()}
@@ -142,6 +144,35 @@ def _slowest_refine_rows() -> list[Row]:
                         note=f"lobe {worst}" + (f" and {(worst + 8) % n}" if "merge" in name else ""),
                         extra={"median_ms": round(1000 * float(np.median(list(times.values()))), 1)}))
     return rows
+
+
+SPLIT_LOBES = (17, 19, 6, 22, 26, 3, 21, 5)
+"""The leaf-on pine's lobes whose splits in 20 were slowest in session 23's probe (helper-160, helper-162):
+pieces no routed branch clears, each repaired."""
+
+
+def _twenty_strokes(d, j: int) -> list[np.ndarray]:
+    """20 one-point strokes (output frame) on lobe ``j``: its points nearest k-means++ centres (seeds
+    100-103), else 20 evenly spaced by index; the first set whose pieces all get the 4 points a lobe
+    needs."""
+    from scipy.cluster.vq import kmeans2
+    from scipy.spatial import cKDTree
+
+    from arboretum_library.errors import InputError
+    from arboretum_server.decompose import refine
+
+    m = d.lobes[j].members
+    tries = [m[cKDTree(d.points[m]).query(kmeans2(d.points[m], 20, seed=s, minit="++")[0])[1]]
+             for s in range(100, 104)]
+    tries += [m[(np.linspace(0, len(m) - 1, 20).round().astype(int) + off) % len(m)] for off in range(4)]
+    for pick in tries:
+        strokes = [d.to_output(d.points[p])[None] for p in pick]
+        try:
+            refine.split_lobe(d, j, strokes)
+            return strokes
+        except InputError:
+            continue
+    raise RuntimeError(f"lobe {j}: no 20 strokes split it")
 
 
 def _kernel_rows() -> list[Row]:
