@@ -83,3 +83,21 @@ def test_the_foot_of_a_leafy_tree_with_no_ground_is_no_mirror():
     pts, _ = toy_scan(truth, n=40000, noise=noise, seed=3, **CASES["leaf-on"])
     ground, found = find_ground(pts, 0.015)
     assert found is None and ground.sum() == 0
+
+
+def test_equal_flat_whorls_over_a_bare_trunk_are_no_mirror():
+    # helper-163's review: a groundless pole with 8 equal whorls 1 m apart mirrors whorl onto whorl in the
+    # plane of the 5.2 m whorl; everything under it (4,839 points, trunk and lowest whorl) was cut
+    rng = np.random.default_rng(0)
+
+    def cyl(n, z0, z1):
+        a, z = rng.uniform(0, 2 * np.pi, n), rng.uniform(z0, z1, n)
+        return np.c_[0.1 * np.cos(a), 0.1 * np.sin(a), z]
+
+    def whorl(z):
+        r, b = np.sqrt(rng.uniform(0, 1, 4000)), rng.uniform(0, 2 * np.pi, 4000)
+        return np.c_[r * np.cos(b), r * np.sin(b), z + rng.normal(0, 0.003, 4000)]
+
+    pts = np.r_[cyl(1200, 0, 12), cyl(300, 0, 0.5), *[whorl(z) for z in np.arange(4.2, 12, 1.0)]]
+    ground, surface = find_ground(pts, 0.015)
+    assert surface is None and ground.sum() == 0
