@@ -13,6 +13,7 @@ topology stays connected exactly. Eq. (1) (the joint) is applied before and kept
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from scipy.spatial import cKDTree
 
 from .merge import BranchSet, add_branch
@@ -59,14 +60,29 @@ def smooth_polylines(segments: list[np.ndarray], limit: float | np.ndarray = LIM
     lim = np.broadcast_to(np.asarray(limit, dtype=np.float64), (len(flat),))[idx]
     if len(idx) == 0:
         return [s.copy() for s in segments]
-    for it in range(iterations):
-        w = -INFLATE if (it % 2 and INFLATE) else weight
-        flat[idx] += w * (0.5 * (flat[idx - 1] + flat[idx + 1]) - flat[idx])
-        disp = flat[idx] - orig[idx]
-        n = np.linalg.norm(disp, axis=1)
-        scale = np.minimum(1.0, lim / np.maximum(n, 1e-300))
-        flat[idx] = orig[idx] + disp * scale[:, None]
+    steps = np.array([-INFLATE if (it % 2 and INFLATE) else weight for it in range(iterations)], np.float64)
+    _smooth_kernel(flat, orig, idx, np.ascontiguousarray(lim), steps)
     return np.split(flat, np.cumsum(lens)[:-1])
+
+
+@njit(cache=True)
+def _smooth_kernel(flat, orig, idx, lim, steps):  # pragma: no cover - numba
+    """``smooth_polylines``' iterations in place on ``flat``, the numpy steps they replace (session 23: 224
+    -> 15 us on a 40-vertex branch; a refinement smooths a few short ones many times), the same operations in the same
+    order: every inner vertex moves towards its neighbours' old midpoint, then back within its limit."""
+    moved = np.zeros((len(idx), 3))
+    for w in steps:
+        for a in range(len(idx)):
+            i = idx[a]
+            for k in range(3):
+                moved[a, k] = flat[i, k] + w * (0.5 * (flat[i - 1, k] + flat[i + 1, k]) - flat[i, k])
+        for a in range(len(idx)):
+            i = idx[a]
+            d0, d1, d2 = moved[a, 0] - orig[i, 0], moved[a, 1] - orig[i, 1], moved[a, 2] - orig[i, 2]
+            n = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            r = lim[a] / (n if not n < 1e-300 else 1e-300)  # np.maximum: a NaN stays NaN
+            scale = r if not r > 1.0 else 1.0  # np.minimum
+            flat[i, 0], flat[i, 1], flat[i, 2] = orig[i, 0] + d0 * scale, orig[i, 1] + d1 * scale, orig[i, 2] + d2 * scale
 
 
 def depths(parents: list[int]) -> np.ndarray:
