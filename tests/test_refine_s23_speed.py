@@ -1,5 +1,5 @@
 """Splits into many pieces (session 23): the packed inside tests read each hull's faces through an XY grid
-(``hullpack._face_grid``) and give, bit for bit, the answers of testing every face (``lobes.inside``), for
+(``hullpack._grid_of``, ``_bucket``) and give, bit for bit, the answers of testing every face (``lobes.inside``), for
 a fraction of the face tests."""
 
 from __future__ import annotations

@@ -83,8 +83,21 @@ def test_segments_give_the_same_answers_and_hull_tests(rng):
         assert first_clear(lobes, 1, a, b, 0.02, boxes(lobes)) == int(np.argmin(want))
 
 
+def _numpy_grid(verts, flo, fhi):
+    """The grid, cell starts and cell faces as ``hullpack`` built them in numpy before helper-165."""
+    from arboretum_server.decompose.hullpack import FACES_PER_CELL, GRID_MAX, _bucket
+
+    lo, span = verts[:, :2].min(axis=0), np.ptp(verts[:, :2], axis=0)
+    n = int(np.clip(np.sqrt(len(flo) / FACES_PER_CELL), 1, GRID_MAX))
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        per = n / span
+    per = np.where(np.isfinite(per) & (span > 0), per, 0.0)
+    grid = np.array([lo[0], lo[1], per[0], per[1], n, n], np.float64)
+    return (grid, *_bucket(grid, flo, fhi))
+
+
 def test_the_compiled_pack_holds_the_numbers_numpy_gave(rng):
-    from arboretum_server.decompose.hullpack import _face_boxes, _face_grid, _grid_of, pack_hull
+    from arboretum_server.decompose.hullpack import _face_boxes, _grid_of, pack_hull
 
     hulls = [(lb.hull_vertices, lb.hull_faces) for lb in _alpha_lobes(rng, 3) + _blob_lobes(rng, 3)]
     hulls += [(np.array([[0.0, 0, 0], [0, 0, 1], [0, 0, 2]]), np.array([[0, 1, 2], [0, 2, 1]])),  # flat
@@ -94,7 +107,7 @@ def test_the_compiled_pack_holds_the_numbers_numpy_gave(rng):
         pack = pack_hull(verts, faces)
         corner = verts[faces]
         flo, fhi = corner[:, :, :2].min(axis=1), corner[:, :, :2].max(axis=1)
-        grid, start, cells = _face_grid(verts, flo, fhi)  # the numpy build of before
+        grid, start, cells = _numpy_grid(verts, flo, fhi)  # the numpy build of before
         assert np.array_equal(pack.face_lo, flo) and np.array_equal(pack.face_hi, fhi)
         assert np.array_equal(pack.face_top, corner[:, :, 2].max(axis=1))
         assert np.array_equal(pack.grid[0], grid) and pack.grid.dtype == grid.dtype

@@ -4,8 +4,9 @@ compiled loop that stops at the first hull holding a point. Each answer is the o
 hull by hull (the same ray-crossing count, ``lobes._crossings_of``), for the refinement repairs
 (``clear.inside_foreign``, ``clear.blocked``) that ask it of every lobe of a tree many times over.
 
-Each hull's faces are also bucketed in an XY grid of its box (``_face_grid``): a point's ray meets only faces
-whose XY box holds it, and all of those lie in the point's cell, so a test reads that cell's faces alone, the
+Each hull's faces are also bucketed in an XY grid of its box (``_grid_of``, ``_bucket``): a point's ray meets
+only faces whose XY box holds it, and all of those lie in the point's cell (``_cell`` never decreases as a
+coordinate grows), so a test reads that cell's faces alone, the
 same crossings summed (session 23: with about 2 faces a cell, the leaf-on pine's slowest split into 20 went
 from 224 to 173 ms; the loops read every face of every hull a sample's box test let through).
 """
@@ -52,11 +53,10 @@ def pack_hull(vertices: np.ndarray, faces: np.ndarray) -> HullPack:
     -> 6 us a hull, which a split into 100 pieces pays for 100 new hulls)."""
     verts = np.array(vertices, dtype=np.float64).reshape(-1, 3)  # a copy: a cache keyed by the hull's arrays holds it
     faces = np.array(faces, dtype=np.int64).reshape(-1, 3)
-    if not len(faces):
-        flo, fhi = np.zeros((0, 2)), np.zeros((0, 2))
-        grid, start, cells = _face_grid(verts, flo, fhi)
-        return HullPack(verts, faces, np.array([0, 0], np.int64), flo, fhi, np.zeros(0), grid[None],
-                        np.array([0, len(start) - 1], np.int64), start, cells)
+    if not len(faces):  # no face: one empty cell
+        return HullPack(verts, faces, np.array([0, 0], np.int64), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0),
+                        np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 1.0]]), np.array([0, 1], np.int64), np.zeros(2, np.int64),
+                        np.zeros(0, np.int64))
     flo, fhi, ftop = _face_boxes(verts, faces)
     grid = _grid_of(verts, len(faces), float(FACES_PER_CELL), int(GRID_MAX))
     start, cells = _bucket(grid, flo, fhi)
@@ -80,7 +80,7 @@ def _face_boxes(verts, faces):  # pragma: no cover - numba
 
 @njit(cache=True)
 def _grid_of(verts, n_faces, per_cell, most):  # pragma: no cover - numba
-    """``_face_grid``'s grid (6,) of a hull with faces, compiled: (faces / ``per_cell``) ** 0.5 cells along x
+    """The grid (6,) of a hull with faces (see ``HullPack.grid``), compiled: (faces / ``per_cell``) ** 0.5 cells along x
     and y (1 to ``most``), over the XY box of all its vertices."""
     lo = np.zeros(2)
     span = np.zeros(2)
@@ -96,25 +96,8 @@ def _grid_of(verts, n_faces, per_cell, most):  # pragma: no cover - numba
 
 
 FACES_PER_CELL = 2.0
-"""``_face_grid`` makes about (faces / this) cells per hull (at most ``GRID_MAX`` along x or y)."""
+"""``_grid_of`` makes about (faces / this) cells per hull (at most ``GRID_MAX`` along x or y)."""
 GRID_MAX = 64
-
-
-def _face_grid(verts: np.ndarray, flo: np.ndarray, fhi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One hull's XY grid (6,) (see ``HullPack.grid``), each cell's first face (C + 1,) and the faces (E,)
-    of every cell their XY box overlaps. The cells of a face's box and of a point in it are both
-    ``_cell`` of their coordinates, which never decreases as a coordinate grows: a face whose box holds a
-    point is in the point's cell."""
-    if not len(flo):
-        return np.array([0.0, 0.0, 0.0, 0.0, 1, 1]), np.zeros(2, np.int64), np.zeros(0, np.int64)
-    lo, span = verts[:, :2].min(axis=0), np.ptp(verts[:, :2], axis=0)
-    n = int(np.clip(np.sqrt(len(flo) / FACES_PER_CELL), 1, GRID_MAX))
-    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-        per = n / span
-    per = np.where(np.isfinite(per) & (span > 0), per, 0.0)  # a flat or tiny hull: one column of cells
-    grid = np.array([lo[0], lo[1], per[0], per[1], n, n], np.float64)
-    start, cells = _bucket(grid, flo, fhi)
-    return grid, start, cells
 
 
 @njit(cache=True)
@@ -207,7 +190,9 @@ def _cells(pack: HullPack) -> tuple:
 @njit(cache=True)
 def _point_inside(v, f, cells, flo, fhi, ftop, lo, hi, skip, x, y, z, tests) -> bool:  # pragma: no cover
     """True if (x, y, z) lies inside a hull other than ``skip`` whose box strictly holds it; ``tests[0]``
-    counts the hulls tried. A hull's crossings are summed over the faces of the point's grid cell only."""
+    counts the hulls tried. A hull's crossings are summed over the faces of the point's grid cell only.
+    The face loop is ``_hull_holds``' written out: a call holding the box test made this kernel 25 times
+    slower (session 23, helper-165); a call for the face loop alone was not measured here."""
     grid, cell_first, cell_start, cell_faces = cells
     for k in range(grid.shape[0]):
         if k == skip or not (lo[k, 0] < x < hi[k, 0] and lo[k, 1] < y < hi[k, 1] and lo[k, 2] < z < hi[k, 2]):
