@@ -191,21 +191,14 @@ def _cells(pack: HullPack) -> tuple:
 def _point_inside(v, f, cells, flo, fhi, ftop, lo, hi, skip, x, y, z, tests) -> bool:  # pragma: no cover
     """True if (x, y, z) lies inside a hull other than ``skip`` whose box strictly holds it; ``tests[0]``
     counts the hulls tried. A hull's crossings are summed over the faces of the point's grid cell only.
-    The face loop is ``_hull_holds``' written out: a call holding the box test made this kernel 25 times
-    slower (session 23, helper-165); a call for the face loop alone was not measured here."""
+    The box test stays here, the face loop is ``_hull_holds``' (a call holding the box test too made this
+    kernel 25 times slower: session 23, helper-165)."""
     grid, cell_first, cell_start, cell_faces = cells
     for k in range(grid.shape[0]):
         if k == skip or not (lo[k, 0] < x < hi[k, 0] and lo[k, 1] < y < hi[k, 1] and lo[k, 2] < z < hi[k, 2]):
             continue
         tests[0] += 1
-        c = cell_first[k] + _cell(grid, k, x, 0) * int(grid[k, 5]) + _cell(grid, k, y, 1)
-        total = 0
-        for e in range(cell_start[c], cell_start[c + 1]):
-            t = cell_faces[e]
-            if x < flo[t, 0] or x > fhi[t, 0] or y < flo[t, 1] or y > fhi[t, 1] or z > ftop[t]:
-                continue  # the ray misses the face (as in lobes._crossings_of)
-            total += face_crossing(v, f, t, x, y, z)
-        if total > 0:
+        if _hull_holds(v, f, cells, flo, fhi, ftop, k, x, y, z):
             return True
     return False
 
