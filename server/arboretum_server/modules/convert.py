@@ -162,9 +162,12 @@ def fit_pinned(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray
 def _cluster(sig: np.ndarray, k: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Labels (P,) and medoid piece per type (K,), types renumbered by first appearance."""
     from sklearn.cluster import KMeans
+    from threadpoolctl import threadpool_limits
 
     k = min(k, len(np.unique(sig.round(12), axis=0)))
-    km = KMeans(n_clusters=k, n_init=4, random_state=int(rng.integers(0, 2**31 - 1))).fit(sig)
+    km = KMeans(n_clusters=k, n_init=4, random_state=int(rng.integers(0, 2**31 - 1)))
+    with threadpool_limits(limits=1, user_api="openmp"):  # the same types on any core count (lobes.KMEANS_THREADS)
+        km.fit(sig)
     labels = km.labels_.astype(np.int64)
     _, first = np.unique(labels, return_index=True)
     order = labels[np.sort(first)]
