@@ -33,6 +33,11 @@ LINK = 0.02
 """Points of the base band closer than this fraction of the height belong to one cluster."""
 BASE_NEIGHBOURS = 4
 """``_dense_start``: a point of a trunk's foot has at least this many others within ``LINK`` of the height."""
+FLOOR_UNDER = 0.05
+"""When the base band starts more than this fraction of the height above the ground found, that ground is
+the floor of outliers strewn under the trees, not theirs, and its tilt is noise: ``find_root``'s
+several-trees check is made on the heights as given too (two pines 6 apart, no ground, 5 % uniform
+outliers: a floor tilted 0.22 put their feet 2.3 and 3.6 over it, in no one band; helper-171)."""
 LINK_MAX = 4000
 """A base band of more points is clustered on this many of them (``_link``)."""
 HANGING_SHARE = 0.5
@@ -62,8 +67,11 @@ def find_root(pts: np.ndarray, up: np.ndarray | None = None, cut: float | None =
     When the band starts lower, the several-trees check is made on a band from there too (``_above_cut``):
     the ground cut keeps only the trunk of the narrowest slice, so another tree's foot went with the
     ground and stood above the band (two pines among 2-15 % uniform outliers, the cut risen 0.45-2.4 m
-    on 20 m in 16 of them: taken as one tree in 23 of 40 clouds, helper-146; 6 now, their ground tilted
-    or found on the outliers' floor). Only to refuse: the root stays.
+    on 20 m in 16 of them: taken as one tree in 23 of 40 clouds, helper-146; 6 after this check, their ground
+    tilted or found on the outliers' floor; 0 since session 24). When the band starts more than ``FLOOR_UNDER``
+    of the height above the ground, that ground is the outliers' floor, whose tilt set the feet apart in
+    ``up``: the check is made on the heights as given too (``_above_cut`` from ``_dense_start`` in z).
+    Only to refuse: the root stays.
     """
     z = pts[:, 2]
     h = np.ptp(z)
@@ -78,6 +86,8 @@ def find_root(pts: np.ndarray, up: np.ndarray | None = None, cut: float | None =
             _above_cut(pts, up, h, start)  # perhaps two trees' patches joined: look above it
     if cut is not None and cut > start:
         _above_cut(pts, up, h, cut)
+    if up is not z and start > FLOOR_UNDER * h:  # the ground found lies far under the trees: its tilt is
+        _above_cut(pts, z, h, _dense_start(pts, z, h))  # the outliers' floor's, no ground's: check level too
     trunk = pts[band[lab == big[0]]] if len(big) else pts[band]
     centre = np.median(trunk[:, :2], axis=0)
     r90 = plan_radius(trunk, 90)
@@ -108,15 +118,21 @@ def _above_cut(pts: np.ndarray, up: np.ndarray, h: float, cut: float) -> None:
     (``_flat``: ground left above the cut, the ground found lying under the real one, on the floor of
     outliers), once more on the band from ``LINK`` of the height ``h`` above the patch (its 90th
     percentile), where the trunks standing on it rise apart (two pines 3 apart among 10-15 %
-    outliers: their patches joined into one cluster). Only clusters a trunk column rises from count
-    there (``columns``): the top of a boulder by the trunk, left over the cut, stood 0.8 of the height
-    apart from it on the toy tree."""
+    outliers: their patches joined into one cluster). The same above the band's largest cluster when
+    it is no trunk column (``_trunk``) nor flat: patches with outliers linked to them, too thick to
+    read flat, or one tree's patch with its trunk's foot in it (two pines 3 apart over the outliers'
+    floor, 15 % outliers: the other trunk, 22-35 points, under 10 % of that band, was no big cluster;
+    helper-171). Only clusters a trunk column rises from count there (``columns``): the top of a
+    boulder by the trunk, left over the cut, stood 0.8 of the height apart from it on the toy tree."""
     band, lab, big = _band(pts, up, h, cut, columns=True)
-    if not len(big):
-        return
-    patch = np.c_[pts[band, :2], up[band]][lab == big[0]]
-    if _flat(patch, h):
-        _band(pts, up, h, float(np.percentile(patch[:, 2], 90)) + LINK * h, columns=True)
+    base = np.c_[pts[band, :2], up[band]]
+    if len(big) and _flat(base[lab == big[0]], h):
+        patch = base[lab == big[0]]
+    else:  # the band's largest cluster is no trunk: patches with outliers linked, a trunk's foot in one
+        patch = base[lab == np.argmax(np.bincount(lab))]
+        if len(patch) < BASE_MIN or _trunk(*_columns(np.c_[pts[:, :2], up], [patch], h)[0]):
+            return
+    _band(pts, up, h, float(np.percentile(patch[:, 2], 90)) + LINK * h, columns=True)
 
 
 def _dense_start(pts: np.ndarray, up: np.ndarray, h: float) -> float:
