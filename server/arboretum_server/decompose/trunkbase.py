@@ -401,7 +401,7 @@ def detached(pts: np.ndarray, up: np.ndarray, root: np.ndarray) -> np.ndarray:
     if up[piece].max() < up[foot] + (APART_SPAN - LINK) * h and BASE_MIN <= len(piece) < APART_SHARE * len(pts):
         out[piece] = True
         out[window[_scatter(q, lab, inside, LINK * h)]] = True
-        if not _gapped(np.c_[pts[:, :2], up], out, APART_GAP * LINK * h):
+        if not _gapped(np.c_[pts[:, :2], up], out, (1.0 if _filled(pts[out, :2]) else APART_GAP) * LINK * h):
             out[:] = False
     return out
 
@@ -411,7 +411,9 @@ APART_GAP = 1.5
 ``APART_SPACING`` times the spacing of the piece's own points: a real gap. A sparse trunk's points lie
 just over ``LINK`` apart, so its own foot came out as a piece, and the root went up the trunk by up to
 11 % of the height (15 of 600 synthetic clouds of 1,000-6,000 points with no ground; all 7 with ground
-where it fired: helper-161's review)."""
+where it fired: helper-161's review). A piece that fills a disc in plan (``_filled``: a clump; a sparse
+trunk's foot is a ring) needs a gap of ``LINK`` only: a clump 5 % of the height under a scan's foot lay
+1.3-1.5 ``LINK`` from it and stayed the root (helper-170)."""
 APART_SPACING = 5.0
 
 
@@ -454,12 +456,36 @@ def under(piece: np.ndarray, rest: np.ndarray, root: np.ndarray, h: float) -> bo
     the root. Measured at the root alone, the feet of trees leaning 10-30 degrees with their trunk unseen
     for 2-15 % of the height above the foot were left out, 216 of 480 (helper-156's review); measured on
     the axis alone, a sparse trunk's under branch layers reaching into the slab, 5 of 96 (helper-153's
-    whorled trees: the line pulled 1.1 off the trunk)."""
+    whorled trees: the line pulled 1.1 off the trunk). A piece that fills a disc in plan (``_filled``,
+    seen along the axis's slope) is no foot but a clump, wherever it stands: clumps of 1-3 % of the points
+    centred under scans 01, 06, 07 were the root, 7.5-23 % of the height low (27 of 90, helper-170)."""
     tol = max(plan_radius(piece, 90), LINK * h)
     centre = np.median(piece[:, :2], axis=0)
-    if np.linalg.norm(centre - root[:2]) <= tol:
-        return True
-    return bool(np.linalg.norm(centre - _axis_at(rest, root, h, float(np.median(piece[:, 2])))) <= tol)
+    z = float(np.median(piece[:, 2]))
+    axis = _axis_at(rest, root, h, z)
+    if np.linalg.norm(centre - root[:2]) > tol and np.linalg.norm(centre - axis) > tol:
+        return False
+    lean = (_axis_at(rest, root, h, z + AXIS_SLAB * h) - axis) / (AXIS_SLAB * h)
+    return not _filled(piece[:, :2] - np.outer(piece[:, 2] - z, lean))
+
+
+HOLLOW_CORE = 0.4
+"""``_filled``: the core of a piece in plan, as a fraction of its points' median distance from its circle's
+centre, ..."""
+FILLED_SHARE = 0.04
+"""... in which a trunk's foot holds under this share of its points (a ring of bark: none; the buttressed
+scan 07's foot cut off by a gap: up to 1.4 %), and a clump more (a Gaussian blob: 10.5 %; clumps of 1-3 %
+of the points under scans 01, 06, 07: 6.6 % or more)."""
+
+
+def _filled(xy: np.ndarray) -> bool:
+    """Whether the plan positions ``xy`` (M, 2) of a piece fill a disc rather than lie on a ring: ``FILLED_SHARE``
+    of them or more lie within ``HOLLOW_CORE`` of the median distance from the centre of the circle fitted
+    to them (an algebraic fit: a half-seen foot's arc finds its centre)."""
+    a = np.c_[2.0 * xy, np.ones(len(xy))]
+    centre = np.linalg.lstsq(a, (xy ** 2).sum(axis=1), rcond=None)[0][:2]
+    d = np.linalg.norm(xy - centre, axis=1)
+    return bool((d < HOLLOW_CORE * np.median(d)).mean() >= FILLED_SHARE)
 
 
 def _axis_at(rest: np.ndarray, root: np.ndarray, h: float, z: float) -> np.ndarray:
