@@ -17,30 +17,35 @@ def scan06(scans_dir):
 
 
 def test_tied_reroutes_of_a_real_scan_stay_bounded_and_match_full_runs(scan06, monkeypatch):
+    """Since session 24 the reroutes share one Dijkstra run, each repaired over its own zone edges
+    (``graph.path_after_cut``); a path that meets a tie still takes ``tied_path``'s, so full runs give the same."""
+    from arboretum_server.decompose import secondary
     from arboretum_server.decompose.options import DecomposeOptions
     from arboretum_server.decompose.pipeline import decompose
 
-    limits, unique = [], []
-    plain_dijkstra, plain_unique = graph.dijkstra, graph.path_is_unique
+    runs, tied = [], []
+    plain_dijkstra, plain_tied = graph.dijkstra, graph.tied_path
 
     def spy(adj, **k):
-        if "limit" in k:
-            limits.append(k["limit"])
+        runs.append(k.get("limit", np.inf))
         return plain_dijkstra(adj, **k)
 
-    def spy_unique(*a):
-        unique.append(plain_unique(*a))
-        return unique[-1]
+    def spy_tied(*a):
+        tied.append(plain_tied(*a))
+        return tied[-1]
 
     monkeypatch.setattr(graph, "dijkstra", spy)
-    monkeypatch.setattr(graph, "path_is_unique", spy_unique)
-    bounded = decompose(scan06, DecomposeOptions())
-    assert bounded.stats["rerouted"] == len(limits) == len(unique) == 24
-    assert all(np.isfinite(limits))  # no reroute ran Dijkstra a second time, in full
-    assert unique.count(False) >= 5  # though several met a tie on their path
-    monkeypatch.setattr(graph, "path_cost", lambda adj, known: np.inf)  # every reroute a full run
+    monkeypatch.setattr(graph, "tied_path", spy_tied)
+    shared = decompose(scan06, DecomposeOptions())
+    assert shared.stats["rerouted"] == 24 and len(runs) == 4  # not one per reroute (24 before)
+    assert not np.isfinite(runs).any()  # no bounded run: each reroute repaired the shared one
+    assert len(tied) >= 5 and all(t is not None for t in tied)  # several met a tie on their path
+    def full_path(r, j, adj, target):  # a full run, ties broken by tied_path as before (the known path has no edge)
+        return graph.path_to(graph.shortest_path_to(adj, r.root, target, np.array([r.root, target])), target)
+
+    monkeypatch.setattr(secondary, "_reroute_path", full_path)
     full = decompose(scan06, DecomposeOptions())
-    assert all(np.array_equal(a, b) for a, b in zip(hbl_arrays(bounded), hbl_arrays(full), strict=True))
+    assert all(np.array_equal(a, b) for a, b in zip(hbl_arrays(shared), hbl_arrays(full), strict=True))
 
 
 def test_tied_path_walks_to_the_lowest_numbered_tied_neighbour():

@@ -92,13 +92,15 @@ def _strokes(strokes) -> list[np.ndarray]:
 
 
 def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], centres: np.ndarray,
-            t0: float, op: str, order: list[int] | None = None) -> Decomposition:
+            t0: float, op: str, order: list[int] | None = None, hbl: bool = True) -> Decomposition:
     """Route the new lobes over ``groups`` after ``kept`` and rebuild the records.
 
     A new lobe's branch still crossing another new lobe carves its way through it (``tunnel.behind`` in
     ``make_lobes``); a kept lobe whose secondary branch would run through a new lobe is carved out of it,
     else routed again with them.
     ``order`` (one slot per kept lobe and group, in that order) gives each lobe's place in the result.
+    ``hbl``: False leaves ``d``'s HBL in place, for a caller that changes the lobes again and builds it once
+    (``split_lobe``: ``build_hbl`` is a pure function of the state, so the same HBL either way).
     """
     kept, groups, centres = list(kept), list(groups), list(centres)
     slots = list(order) if order is not None else list(range(len(kept) + len(groups)))
@@ -133,7 +135,7 @@ def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], c
     stats = dict(d.stats, lobes=len(lobes))
     out = replace(d, lobes=tuple(lobes), lobe_of=lobe_of, stats=stats, zone_sources=sources,
                   timing=dict(d.timing, **{op: time.perf_counter() - t0}))
-    return replace(out, hbl=build_hbl(out))
+    return replace(out, hbl=build_hbl(out)) if hbl else out
 
 
 def _sources(d: Decomposition, members: list[np.ndarray]) -> np.ndarray | None:
@@ -313,20 +315,20 @@ def split_lobe(d: Decomposition, j: int, strokes: list[np.ndarray], seed: int = 
                          f"lobe needs at least {MIN_LOBE_POINTS}: draw it over more of the lobe")
     centres = np.array([d.points[g].mean(axis=0) for g in groups])
     kept = [x for k, x in enumerate(d.lobes) if k != j]
-    return _along_split(_finish(d, kept, groups, centres, t0, "split_lobe"), lb, len(kept), t0)
+    return _along_split(_finish(d, kept, groups, centres, t0, "split_lobe", hbl=False), lb, len(kept), t0)
 
 
 def _along_split(d: Decomposition, split: LobeState, n_kept: int, t0: float) -> Decomposition:
-    """``d`` with each piece of the ``split`` lobe (lobes ``n_kept`` on) whose branch still enters another
-    lobe given a branch along the split lobe's own, when one clears it (``tunnel.along``); ``d`` itself when
-    none is crossing. Dozens of pieces packed into one lobe's place leave no route from the main branches
-    clear to the inner ones (session 23's probe: on a pine, 8 of 37 splits in 20 left 3-12 pieces each
+    """``d`` (its HBL not yet built) with each piece of the ``split`` lobe (lobes ``n_kept`` on) whose branch
+    still enters another lobe given a branch along the split lobe's own, when one clears it (``tunnel.along``),
+    and its HBL built once (before session 24 also for ``_finish``, and dropped here). Dozens of pieces
+    packed into one lobe's place leave no route from the main branches clear to the inner ones (session 23's probe: on a pine, 8 of 37 splits in 20 left 3-12 pieces each
     whose branch ran 3 cm deep through a kept lobe)."""
     lobes = list(d.lobes)
     tol = d.options.step / 2
     bad = [k for k in range(n_kept, len(lobes)) if foreign(lobes, k, lobes[k].segment, tol, boxes(lobes))]
     if not bad or split.parent < 0 or len(split.segment) < 2:
-        return d
+        return replace(d, hbl=build_hbl(d))
     for k in bad:
         along(lobes, n_kept, k, (split.segment, split.parent, split.parent_vertex), d.points, d.options)
     out = replace(d, lobes=tuple(lobes), timing=dict(d.timing, split_lobe=time.perf_counter() - t0))

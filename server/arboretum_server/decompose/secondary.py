@@ -5,16 +5,17 @@ Routing: the shortest paths run on the kNN graph with every edge that touches a 
 within ``ZONE_RADIUS`` of a lobe's points) made ``ZONE_COST`` times longer, so a path reaches its lobe
 along the wood and enters foliage only near its target. A secondary branch that still has a vertex
 inside a foreign lobe's hull is routed again on a graph where foreign zones cost ``FOREIGN_COST`` times
-more (one extra Dijkstra per offender, stopped at the length of its first path on that graph, which
-bounds the new one: ``graph.shortest_path_to``, the same path as a full run, ties broken by node
-number). If even that path crosses (the only wood to the lobe runs through another lobe), the secondary
-branch becomes a straight segment from the nearest main-branch vertex whose segment to the lobe centre
-stays clear (a deviation from the paper, which has no such guarantee), else a two-piece one through one of
-the lobe's own points. If none clears because the main branches there run inside foreign lobes (an alpha
-shape fills the gap where a main branch passes through its foliage: the pine's lobes wrap its trunk), those
-lobes are rebuilt with the main branches carved out (``unwrap``) and both repairs are tried again; if still
-none clears, the last step of ``make_lobes`` (``tunnel.behind``) carves the branch a way through the other
-new lobes, or moves its lobe's centre.
+more (the same path as a full Dijkstra run, ties broken by node number: ``graph.shortest_path_to``; since
+session 24 one run per ``make_lobes`` call on the graph where every zone is foreign, repaired for each
+offender over its own zone's edges, ``graph.path_after_cut``; before, one run per offender, bounded by
+the length of its first path on that graph). If even that path crosses (the only wood to the lobe runs
+through another lobe), the secondary branch becomes a straight segment from the nearest main-branch
+vertex whose segment to the lobe centre stays clear (a deviation from the paper, which has no such
+guarantee), else a two-piece one through one of the lobe's own points. If none clears because the main
+branches there run inside foreign lobes (an alpha shape fills the gap where a main branch passes through
+its foliage: the pine's lobes wrap its trunk), those lobes are rebuilt with the main branches carved out
+(``unwrap``) and both repairs are tried again; if still none clears, the last step of ``make_lobes``
+(``tunnel.behind``) carves the branch a way through the other new lobes, or moves its lobe's centre.
 
 Every secondary branch is smoothed (smooth.py, ours) with its connection point on the main branch and its
 tip at the lobe centre fixed; where the smoothed curve would enter a foreign lobe and the unsmoothed
@@ -33,7 +34,7 @@ from scipy.spatial import cKDTree
 
 from .carve import part_overlaps, remember_plain, unwrap
 from .clear import bent_fallback, boxes, foreign, inside_foreign, straight_fallback
-from .graph import path_to, query, shortest_path_to, shortest_paths, weighted
+from .graph import path_after_cut, path_to, query, shortest_paths, weighted
 from .grid import BoxGrid
 from .lobes import plain_hull
 from .memo import ArrayMemo
@@ -85,7 +86,13 @@ def zones(pts: np.ndarray, groups: list[np.ndarray], sources: np.ndarray | None 
 def branch_paths(nodes: list[int], pred: np.ndarray, pts: np.ndarray, grid: BoxGrid, step: float) -> list[np.ndarray]:
     """Shortest paths root -> each node, resampled at ``step`` and centred in the cloud."""
     tree = pred.tolist() if len(nodes) > 1 else pred  # one path (a reroute): read in place, no 23 ms copy of 1M
-    raw = [resample_step(pts[path_to(tree, n)], step) for n in nodes]
+    return _centred([pts[path_to(tree, n)] for n in nodes], grid, step)
+
+
+def _centred(paths: list[np.ndarray], grid: BoxGrid, step: float) -> list[np.ndarray]:
+    """The graph ``paths`` (node positions (M, 3) each) resampled at ``step``, centred in the cloud and resampled
+    again (``branch_paths``)."""
+    raw = [resample_step(p, step) for p in paths]
     return [resample_step(p, step) for p in centre_paths(raw, grid)]
 
 
@@ -212,9 +219,10 @@ class _Route(NamedTuple):
     refs: tuple
     tree: cKDTree
     cache: dict
-    """The per-edge zone weights of ``foreign_graph``, built at the first reroute of a ``make_lobes`` call."""
+    """The per-edge zone weights of ``foreign_graph``, built at the first reroute of a ``make_lobes`` call, and
+    the distances on the graph where every zone is foreign (``_reroute_path``)."""
     pred: np.ndarray
-    """(N,) the shared routing's predecessors: its path to a lobe bounds that lobe's reroute."""
+    """(N,) the shared routing's predecessors."""
 
 
 def _edge_zones(adjacency: csr_matrix, zone: np.ndarray) -> tuple[csr_matrix, np.ndarray, np.ndarray]:
@@ -243,14 +251,27 @@ def foreign_graph(r: _Route, j: int) -> csr_matrix:
     return csr_matrix((w, adj.indices, adj.indptr), shape=adj.shape)
 
 
+def _reroute_path(r: _Route, j: int, graph: csr_matrix, target: int) -> np.ndarray:
+    """Node indices root -> ``target`` of lobe ``j``'s reroute on ``graph`` (``foreign_graph(r, j)``): the path
+    ``graph.shortest_path_to`` gives, from the distances on the graph where every zone is foreign (one full
+    Dijkstra per ``make_lobes`` call, kept in ``r.cache``) repaired over lobe ``j``'s own zone edges
+    (``graph.path_after_cut``)."""
+    if "edges" not in r.cache:
+        r.cache["edges"] = _edge_zones(r.adjacency, r.zone)
+    adj, dear, owner = r.cache["edges"]
+    if "base" not in r.cache:
+        r.cache["rows"] = np.repeat(np.arange(adj.shape[0]), np.diff(adj.indptr))
+        r.cache["base"] = shortest_paths(csr_matrix((dear, adj.indices, adj.indptr), shape=adj.shape), r.root)[0]
+    return path_after_cut(graph, r.cache["rows"], r.cache["base"], np.flatnonzero(owner == j), r.root, target)
+
+
 def _reroute(lobes: list[LobeState], j: int, target: int, r: _Route, box):
     """Lobe ``j``'s branch routed again round the foreign lobes (zones ``FOREIGN_COST`` dearer), and when it
     still enters one, the straight, bent and carved repairs in turn (``lobes[j]`` replaced in place; the
     lobes' boxes returned, new when a carving changed a hull)."""
     lb, o = lobes[j], r.o
     graph = foreign_graph(r, j)
-    p2 = shortest_path_to(graph, r.root, target, path_to(r.pred, target))
-    path = branch_paths([target], p2, r.pts, r.grid, o.step)
+    path = _centred([r.pts[_reroute_path(r, j, graph, target)]], r.grid, o.step)
     seg, parent, pv = merge_secondaries(path, r.mains, r.tau, o.resample, o.sc_bins, r.refs)[0]
     seg = _finish(seg, lb.centre)
     smoothed = smooth_polylines([seg], vertex_limits([seg], r.tree))[0]

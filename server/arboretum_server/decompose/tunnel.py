@@ -8,6 +8,7 @@ every lobe of a decomposition.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import replace
 
 import numpy as np
@@ -172,10 +173,11 @@ def along(lobes: list[LobeState], n_kept: int, j: int, branch: tuple[np.ndarray,
     (session 23's probe) left pieces whose every straight route crossed the kept lobes round the main
     branch beside them, and their routed branches ran 3 cm deep through the lobe wrapping the trunk.
     """
-    routes = _along_routes(branch, lobes[j].centre)
+    routes = []  # made one by one up to the first clear one (session 24: 40-100 routes a piece, most unused)
     tol = o.step / 2
     box = boxes(lobes)
-    for seg in routes:
+    for seg in _along_route_iter(branch, lobes[j].centre):
+        routes.append(seg)
         if not foreign(lobes, j, seg, tol, box):
             lobes[j] = replace(lobes[j], segment=seg, parent=branch[1], parent_vertex=branch[2])
             return True
@@ -230,14 +232,17 @@ def _along_bent(lobes: list[LobeState], j: int, seg: np.ndarray, pts: np.ndarray
 def _along_routes(branch: tuple[np.ndarray, int, int], centre: np.ndarray) -> list[np.ndarray]:
     """Every route ``along`` tries, shortest first: ``branch``'s segment up to its vertex v, then every
     <= 1 cm straight to ``centre``, for each v."""
+    return list(_along_route_iter(branch, centre))
+
+
+def _along_route_iter(branch: tuple[np.ndarray, int, int], centre: np.ndarray) -> Iterator[np.ndarray]:
+    """``_along_routes`` one by one, shortest first."""
     seg = np.asarray(branch[0], np.float64)
     if len(seg) == 0:
-        return []
+        return
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(seg, axis=0), axis=1))])
     length = arc + np.linalg.norm(seg - centre, axis=1)
-    out = []
     for v in np.argsort(length, kind="stable"):
         gap = float(np.linalg.norm(centre - seg[v]))
         m = max(2, int(np.ceil(gap / 0.01)) + 1)
-        out.append(np.vstack([seg[:v], seg[v] + np.linspace(0.0, 1.0, m)[:, None] * (centre - seg[v])]))
-    return out
+        yield np.vstack([seg[:v], seg[v] + np.linspace(0.0, 1.0, m)[:, None] * (centre - seg[v])])
