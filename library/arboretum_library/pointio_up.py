@@ -62,8 +62,56 @@ def guess_up(points: np.ndarray) -> UpGuess:
         if wall.any():  # scored without the wall; an axis whose "ground" it was loses the bonus
             s_z = s_z - z_bonus if z_any else _upright_score(pts[~wall], 2, None)
             s_y = s_y - y_bonus if y_any else _upright_score(pts[~wall], 1, None)
+    else:  # ground along both: one may be the face of a wall standing on the other
+        standing = _wall_on_ground(pts, ((2, z_way, z_bonus), (1, y_way, y_bonus)))
+        if standing is not None:
+            axis, score = standing
+            s_z, s_y = (score, s_y - y_bonus) if axis == 2 else (s_z - z_bonus, score)
     confidence = float(1.0 / (1.0 + np.exp(-2.0 * min(abs(s_z - s_y), 20.0))))
     return UpGuess(y_way if s_y > s_z else z_way, confidence, z_way, z_ground)
+
+
+WALL_GROUNDED = 0.9
+"""A wall found along an axis with ground (``_wall_on_ground``) with at least this share of its points in
+that axis's ground band is the ground seen edge on, not a wall (the pine scan's own ground: 1.0; walls
+3 heights long standing on stairs: 0.44-0.72)."""
+
+
+def _wall_on_ground(pts: np.ndarray, axes: tuple) -> tuple[int, float] | None:
+    """(axis, score) of the one axis (``axes``: (axis, way up, ``GROUND_BONUS`` in its score), both with
+    ground at some end) with ground under it along which a wall stands beside the tree (``_wall``, the
+    cloud turned that way up; not ``WALL_GROUNDED`` in its ground band) whose other axis has no ground
+    left without it (that ground was the wall's face), scored without the wall (its ground found
+    again); None when there is none, or one along each (ground seen edge on may pass for a
+    wall: which is which is not told). Stairs beside a wall 3 heights long facing Y: seen along Y the
+    wall's face is ground, so the wall search did not run, and the wall kept in Z's score (its length
+    the crown's width, its foot the trunk's) read the tree on its side (helper-154's 80 files: 70 wrong)."""
+    found = []
+    for k, (axis, way, bonus) in enumerate(axes):
+        if not bonus:
+            continue
+        turned = _turned(pts, axis, way)
+        wall = _wall(turned, axis)
+        if not wall.any():
+            continue
+        ground = _ground(turned, axis)  # not None: the bonus is for it
+        if ground is None or (wall & ground).sum() >= WALL_GROUNDED * wall.sum():
+            continue
+        other, other_way, _ = axes[1 - k]
+        if _ground(_turned(pts, other, other_way)[~wall], other) is not None:
+            continue  # the other axis's ground was not the wall's face
+        rest = turned[~wall]
+        found.append((axis, _upright_score(rest, axis, _ground(rest, axis))))
+    return found[0] if len(found) == 1 else None
+
+
+def _turned(pts: np.ndarray, axis: int, way: str) -> np.ndarray:
+    """``pts`` with ``axis`` negated when ``way`` is upside down ('z-down', 'y-down'), else itself."""
+    if not way.endswith("-down"):
+        return pts
+    flipped = pts.copy()
+    flipped[:, axis] *= -1.0
+    return flipped
 
 
 def _sample(points: np.ndarray) -> np.ndarray:
@@ -473,7 +521,41 @@ def _upper_level(up: np.ndarray, column: np.ndarray, rise: np.ndarray, height: f
     if flight:  # a tread over a tread, nothing between: a smooth steep slope (a crown's side) fills it
         between = (r > 0) & (up >= 0.5 * band) & (up < r - GROUND_TOL * height)
         free &= 10 * np.bincount(column[between], minlength=count) < np.bincount(column[level], minlength=count)
+        return (level & free[column]) | _treads(up, column, rise, height)
     return level & free[column]
+
+
+TREAD_FILL = 0.5
+"""A column of a flight holds treads of its own under its neighbour's level (``_treads``) when its points
+there fill at most this share of the ``GROUND_TOL``-thin slices between (a tread fills one or two; a
+crown's flank or a trunk fills them all)."""
+
+
+def _treads(up: np.ndarray, column: np.ndarray, rise: np.ndarray, height: float) -> np.ndarray:
+    """(N,) bool: the treads a ``_flight`` column holds between its ground and its neighbour's level
+    (``rise``), left out as ground: its points from half a ``GROUND_BAND`` up to that level fill at most
+    ``TREAD_FILL`` of the ``GROUND_TOL``-thin slices there, and nothing stands on them (the band over the
+    level's band holds under a tenth as many points); the level's band goes with them. Where the ground
+    reaches 3 heights out, a column is 0.12 heights wide and holds two or three treads 6 % deep:
+    ``_upper_level`` took only the neighbour's level, the treads under it stayed out of the band and
+    widened the foot slice (scan 06 at the top of a flight going down: Z -0.13 against Y 0.45 written Z
+    up; its upside-down files, turned the right way up since session 23, were read on their side)."""
+    r = rise[column]
+    band, tol, count = GROUND_BAND * height, GROUND_TOL * height, len(rise)
+    own = (r > 0) & (up >= 0.5 * band) & (up < r - tol)
+    if not own.any():
+        return own
+    level = (r > 0) & (up >= r - tol) & (up < r + band)
+    over = (r > 0) & (up >= r + band) & (up < r + 2.0 * band)
+    slices = np.floor(up[own] / tol).astype(np.int64)
+    span = int(slices.max()) + 1
+    keys, hits = np.unique(column[own] * span + slices, return_counts=True)
+    filled = np.bincount(keys[hits >= 2] // span, minlength=count)
+    room = np.maximum((rise - tol - 0.5 * band) / tol, 1.0)  # slices from half a band to the level
+    held = np.bincount(column[own | level], minlength=count)
+    free = 10 * np.bincount(column[over], minlength=count) < held  # nothing stands on the treads
+    ok = (filled <= TREAD_FILL * room) & free & (held >= 5)
+    return (own | level) & ok[column]
 
 
 def _base(low: np.ndarray, surface: np.ndarray, height: float) -> np.ndarray:
@@ -581,9 +663,10 @@ def _flight(low: np.ndarray, surface: np.ndarray, base: np.ndarray, height: floa
     preset's Y files, unsure on flat ground too). A smooth slope steeper than a band a column rises the
     same way, so ``_upper_level`` takes a flight's tread only over a gap (taken like a terrace's, a
     crown's flank seen from below lost its upper levels, and 7 of helper-136's upside-down files were
-    kept as written)."""
+    kept as written). Its neighbour opposite may lie off the surface (``_rises``' ``rim``); the treads a
+    column holds under its neighbour's level are ``_treads``'."""
     lowest = np.full(base.shape, np.inf)
-    for d, across in _rises(low, surface, base, height):
+    for d, across in _rises(low, surface, base, height, rim=True):
         with np.errstate(invalid="ignore"):
             down = np.isfinite(d) & (across <= -GROUND_TOL * height) & (across >= -GROUND_STEP * height)
         lowest = np.where(down, np.minimum(lowest, d), lowest)
@@ -591,23 +674,28 @@ def _flight(low: np.ndarray, surface: np.ndarray, base: np.ndarray, height: floa
     return (np.where(found, lowest, 0.0),) if found.sum() >= STEP_COLUMNS else ()
 
 
-def _rises(low: np.ndarray, surface: np.ndarray, base: np.ndarray, height: float) -> list:
+def _rises(low: np.ndarray, surface: np.ndarray, base: np.ndarray, height: float, rim: bool = False) -> list:
     """For each of a column's 8 neighbours on ``ground_band``'s grid, (its ground over the column's
     ``base`` where it rises more than ``GROUND_BAND`` and at most ``GROUND_STEP`` of ``height``, else NaN;
-    the neighbour opposite's ground over it); [] unless ``STEP_ON`` of the occupied columns have their
-    lowest point within ``GROUND_TOL`` of their 3 x 3 median (that point is a column's ground here)."""
+    the neighbour opposite's ground over it: with ``rim``, its lowest point even off the surface); [] unless
+    ``STEP_ON`` of the occupied columns have their lowest point within ``GROUND_TOL`` of their 3 x 3
+    median (that point is a column's ground here). At the ground's rim a column has 6 neighbours or
+    fewer, and the median of a flight's lowest points there is off them: ``_flight`` asks ``rim`` (a
+    walnut at the top of a flight going down, the ground 3 heights out, kept 28 rim points of its ground
+    out of the band, enough to widen its foot slice)."""
     with np.errstate(invalid="ignore"):
         level = np.where(np.abs(low - surface) < GROUND_TOL * height, low, np.nan)
     if np.isfinite(level).sum() < STEP_ON * np.isfinite(low).sum():
         return []
     pad = np.pad(level, 1, constant_values=np.nan)
+    opposite = np.pad(low, 1, constant_values=np.nan) if rim else pad
     rows, cols = base.shape
     out = []
     with np.errstate(invalid="ignore"):  # NaN: an empty column
         for i, j in ((i, j) for i in range(3) for j in range(3) if (i, j) != (1, 1)):
             d = pad[i:i + rows, j:j + cols] - base
             d = np.where((d > GROUND_BAND * height) & (d <= GROUND_STEP * height), d, np.nan)
-            out.append((d, pad[2 - i:2 - i + rows, 2 - j:2 - j + cols] - base))
+            out.append((d, opposite[2 - i:2 - i + rows, 2 - j:2 - j + cols] - base))
     return out
 
 
