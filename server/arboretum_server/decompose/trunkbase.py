@@ -458,7 +458,10 @@ def under(piece: np.ndarray, rest: np.ndarray, root: np.ndarray, h: float) -> bo
     the axis alone, a sparse trunk's under branch layers reaching into the slab, 5 of 96 (helper-153's
     whorled trees: the line pulled 1.1 off the trunk). A piece that fills a disc in plan (``_filled``,
     seen along the axis's slope) is no foot but a clump, wherever it stands: clumps of 1-3 % of the points
-    centred under scans 01, 06, 07 were the root, 7.5-23 % of the height low (27 of 90, helper-170)."""
+    centred under scans 01, 06, 07 were the root, 7.5-23 % of the height low (27 of 90, helper-170) -
+    when it also crowds its centre (``_peaked``) and differs from the trunk above (``_like_trunk``): a foot
+    noisy for its width, filled by photogrammetry or holding several stems fills a disc too, and was left
+    out, the root up at the gap's top (73 of 960 clouds, helper-172)."""
     tol = max(plan_radius(piece, 90), LINK * h)
     centre = np.median(piece[:, :2], axis=0)
     z = float(np.median(piece[:, 2]))
@@ -466,7 +469,50 @@ def under(piece: np.ndarray, rest: np.ndarray, root: np.ndarray, h: float) -> bo
     if np.linalg.norm(centre - root[:2]) > tol and np.linalg.norm(centre - axis) > tol:
         return False
     lean = (_axis_at(rest, root, h, z + AXIS_SLAB * h) - axis) / (AXIS_SLAB * h)
-    return not _filled(piece[:, :2] - np.outer(piece[:, 2] - z, lean))
+    xy = piece[:, :2] - np.outer(piece[:, 2] - z, lean)
+    return not (_filled(xy) and _peaked(xy) and not _like_trunk(piece, xy, rest, root, h))
+
+
+PEAKED = 1.2
+"""``_peaked``: a clump's points crowd its centre: their plan density within ``PEAK_CORE`` of their median
+distance from the fitted circle's centre is this many times or more that between 0.8 and 1.2 of it (a
+Gaussian blob: 1.8; helper-170's clumps under scans 01, 06, 07 and under leaning trunks, 177 pieces of
+112-348 points: all over 1.2). A foot filled in plan is no denser at its centre than round it: interior
+points of a photogrammetric foot fill a disc evenly (1.0), a noisy ring is hollower (helper-172)."""
+PEAK_CORE = 0.6
+"""``_peaked``'s core, as a fraction of the median distance (wider than ``HOLLOW_CORE``: a clump of 112
+points held 12 within 0.4 of it, too few to weigh: 1.29 there)."""
+TRUNK_LIKE = 1.3
+"""``_like_trunk``: a piece whose plan width and points per unit height are both within this factor of the
+trunk's over ``AXIS_SLAB`` above the root is that trunk's foot, however it fills (a sapling 2-6 cm in
+radius scanned with 1-5 cm noise is a disc with a peaked centre: 0.79-1.09 and 0.89-1.11; helper-170's
+clumps differ by 1.66-2.04 in one of them, helper-172)."""
+
+
+def _peaked(xy: np.ndarray) -> bool:
+    """Whether the plan positions ``xy`` (M, 2) crowd their centre (``PEAKED``): a blob, not a disc or ring."""
+    a = np.c_[2.0 * xy, np.ones(len(xy))]
+    centre = np.linalg.lstsq(a, (xy ** 2).sum(axis=1), rcond=None)[0][:2]
+    d = np.linalg.norm(xy - centre, axis=1)
+    m = float(np.median(d))
+    core = (d < PEAK_CORE * m).sum() / PEAK_CORE ** 2
+    ring = ((d > 0.8 * m) & (d < 1.2 * m)).sum() / (1.2 ** 2 - 0.8 ** 2)
+    return bool(core >= PEAKED * max(ring, 1.0))
+
+
+def _like_trunk(piece: np.ndarray, xy: np.ndarray, rest: np.ndarray, root: np.ndarray, h: float) -> bool:
+    """Whether ``piece`` (M, 3) (``xy`` (M, 2): its plan along the trunk's lean) is as wide and as dense per
+    unit height as the trunk rising from ``root`` (3,) in ``rest`` (K, 3) (``_axis_at``'s points, within
+    ``TRUNK_LIKE``): that trunk's foot."""
+    near = rest[(rest[:, 2] >= root[2]) & (rest[:, 2] <= root[2] + AXIS_SLAB * h)
+                & (np.linalg.norm(rest[:, :2] - root[:2], axis=1) < AXIS_SLAB * h)]
+    if len(near) < BASE_MIN or np.ptp(near[:, 2]) <= LINK * h:
+        return False
+    fit = np.array([np.polyval(np.polyfit(near[:, 2], near[:, i], 1), near[:, 2]) for i in (0, 1)]).T
+    wide = plan_radius(np.c_[xy, piece[:, 2]], 90) / max(float(np.percentile(np.linalg.norm(near[:, :2] - fit, axis=1), 90)), 1e-12)
+    lo, hi = np.percentile(piece[:, 2], [10, 90])
+    dense = 0.8 * len(piece) / max(float(hi - lo), 1e-12) / (len(near) / float(np.ptp(near[:, 2])))
+    return bool(max(wide, 1 / max(wide, 1e-12), dense, 1 / max(dense, 1e-12)) <= TRUNK_LIKE)
 
 
 HOLLOW_CORE = 0.4
