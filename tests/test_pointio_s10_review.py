@@ -119,6 +119,7 @@ def test_a_multi_block_leica_pts_file_is_read_whole(tmp_path, rng):
 
 def test_reader_sources_keep_lines_within_120_characters():
     root = Path(arboretum_library.__file__).parent
-    for name in ("pointio.py", "pointio_formats.py", "pointio_text.py", "pointio_spatial.py", "pointio_up.py"):
+    for name in ("pointio.py", "pointio_formats.py", "pointio_text.py", "pointio_spatial.py", "pointio_up.py",
+                 "pointio_ground.py", "pointio_wall.py"):
         long = [i + 1 for i, ln in enumerate((root / name).read_text().splitlines()) if len(ln) > 120]
         assert not long, (name, long)

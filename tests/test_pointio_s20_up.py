@@ -15,7 +15,9 @@ import pytest
 from arboretum_library import pointio_up
 from arboretum_library.geometry import zup_to_yup
 from arboretum_library.pointio import ReadOptions, read_points, write_points
-from arboretum_library.pointio_up import _median3, _wall, ground_band, guess_up, trunk_on_top
+from arboretum_library.pointio_ground import _median3
+from arboretum_library.pointio_up import ground_band, guess_up, trunk_on_top
+from arboretum_library.pointio_wall import _wall
 
 Z = ReadOptions(up="z")
 
@@ -98,7 +100,7 @@ def test_trunk_on_top_reuses_the_ground_of_the_guess(scan06, monkeypatch):
         assert guess.z_ground is ground
         assert trunk_on_top(pts) is doubted
         with monkeypatch.context() as m:  # given the guess, no second search for ground
-            m.setattr(pointio_up, "_ground", lambda *a: pytest.fail("searched for ground again"))
+            m.setattr(pointio_up, "_ground", lambda *a: pytest.fail("searched for ground again"))  # as trunk_on_top looks it up
             assert trunk_on_top(pts, guess) is doubted
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from arboretum_library import pointio_up
+from arboretum_library import pointio_ground, pointio_up, pointio_wall
 from arboretum_library.geometry import zup_to_yup
 from arboretum_library.pointio import ReadOptions, read_points, write_points
 from arboretum_library.pointio_up import _way_up, ground_band, guess_up
@@ -56,7 +56,7 @@ def test_the_wall_was_ground_to_one_axis_only(scan06):
     pts = pointio_up._sample(_wall_facing_y(scan06, 2.0, 0.35, 0.5))
     z_any, y_any, y_bonus = _way_up(pts, 2)[3], *_way_up(pts, 1)[3:]
     assert (z_any, y_any, y_bonus) == (False, True, pointio_up.GROUND_BONUS)
-    assert pointio_up._wall(pts, 2).sum() >= 7000  # the wall's 8,000 points, nearly all
+    assert pointio_wall._wall(pts, 2).sum() >= 7000  # the wall's 8,000 points, nearly all
 
 
 def test_a_tree_on_ground_keeps_its_bonus(scan06):
@@ -70,7 +70,7 @@ def test_a_tree_on_ground_keeps_its_bonus(scan06):
     ground = np.stack([r * np.cos(a), r * np.sin(a), rng.normal(0, 0.002 * h, n)], axis=1)
     cloud = np.concatenate([scan06, ground + scan06[np.argmin(scan06[:, 2])]])
     pts = pointio_up._sample(cloud)
-    assert not pointio_up._wall(pts, 1).any()
+    assert not pointio_wall._wall(pts, 1).any()
     for way, turned in (("z", cloud), ("y", zup_to_yup(cloud))):
         guess = guess_up(turned)
         assert guess.direction == way and guess.confidence > 0.98, (way, guess)
@@ -90,9 +90,9 @@ def test_the_ground_surface_is_the_last_pass_s(scan06):
     under = ground[rng.integers(0, n, m)] - np.stack([np.zeros(m), np.zeros(m), rng.uniform(0, 0.05 * h, m)], axis=1)
     pts = np.concatenate([scan06, ground, under])
     lo, hi = np.percentile(pts[:, 2], [0.5, 99.5])
-    cell = pointio_up._largest_extent(pts) / pointio_up.GROUND_CELLS
-    column, shape = pointio_up._columns(pts[:, :2], cell)
-    found, low, surface = pointio_up._ground_surface(pts[:, 2], column, shape, cell, float(hi - lo))
+    cell = pointio_ground._largest_extent(pts) / pointio_ground.GROUND_CELLS
+    column, shape = pointio_ground._columns(pts[:, :2], cell)
+    found, low, surface = pointio_ground._ground_surface(pts[:, 2], column, shape, cell, float(hi - lo))
     assert found
-    np.testing.assert_array_equal(surface, pointio_up._median3(low))
+    np.testing.assert_array_equal(surface, pointio_ground._median3(low))
     assert ground_band(pts, 2)[-m:].all()  # the multipath lies in the band

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from arboretum_library import pointio_up
+from arboretum_library import pointio_ground, pointio_up
 from arboretum_library.geometry import zup_to_yup
 from arboretum_library.pointio import ReadOptions, read_points
 from arboretum_library.pointio_up import ground_band, guess_up
@@ -91,12 +91,12 @@ def _grid_steps(cloud: np.ndarray) -> tuple:
     h = pts[:, 2]
     lo, hi = np.percentile(h, [0.5, 99.5])
     height = float(hi - lo)
-    cell = pointio_up._largest_extent(pts) / pointio_up.GROUND_CELLS
-    column, shape = pointio_up._columns(pts[:, :2], cell)
-    found, low, surface = pointio_up._ground_surface(h, column, shape, cell, height)
+    cell = pointio_ground._largest_extent(pts) / pointio_ground.GROUND_CELLS
+    column, shape = pointio_ground._columns(pts[:, :2], cell)
+    found, low, surface = pointio_ground._ground_surface(h, column, shape, cell, height)
     assert found
     base = np.where(np.isfinite(surface) & ~(np.abs(low - surface) < 0.1 * height), surface, low)
-    return pointio_up._steps(low, surface, base, height), height
+    return pointio_ground._steps(low, surface, base, height), height
 
 
 @pytest.mark.parametrize("slope", [0.0, 0.15, 0.3, 0.45])
@@ -115,6 +115,6 @@ def test_terraces_rise_by_their_step(scan06):
     height, within 0.01), in lines across the ground, never more than ``GROUND_STEP``."""
     (lowest, highest), height = _grid_steps(_on_terraces(scan06, 0.06))
     rise = highest[highest > 0]
-    assert len(rise) >= 100 and rise.max() <= pointio_up.GROUND_STEP * height
+    assert len(rise) >= 100 and rise.max() <= pointio_ground.GROUND_STEP * height
     assert np.median(rise) / np.ptp(scan06[:, 2]) == pytest.approx(0.06, abs=0.01)
     assert np.all(lowest <= highest)
