@@ -42,18 +42,24 @@ def unwrap(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, ra
     verts = main_vertices(mains)[0]
     near_pts = verts[np.argsort(np.linalg.norm(verts - lobes[j].centre, axis=1))[:near]]
     wood = sample_polylines(mains.segments, step)
+    held = _boxes_hold(boxes(lobes), near_pts)
     changed = 0
-    for k in range(len(lobes)):
+    for k in map(int, np.flatnonzero(held.any(axis=1))):
         lb = lobes[k]
-        if k == j:
-            continue
-        lo, hi = lb.hull_vertices.min(axis=0), lb.hull_vertices.max(axis=0)
-        c = near_pts[((near_pts > lo) & (near_pts < hi)).all(axis=1)]
-        if not len(c) or not inside(lb.hull_vertices, lb.hull_faces, c).any():
+        if k == j or not inside(lb.hull_vertices, lb.hull_faces, near_pts[held[k]]).any():
             continue
         if carve_lobe(lobes, k, pts, wood, radius):
             changed += 1
     return changed
+
+
+def _boxes_hold(box: tuple[np.ndarray, np.ndarray], q: np.ndarray) -> np.ndarray:
+    """(L, M) bool: which of the points ``q`` (M, 3) lie strictly inside each lobe's hull box (``box``: lo, hi
+    (L, 3), ``clear.boxes``), for all lobes at once. ``unwrap`` takes the boxes before it carves: a carving
+    replaces lobe k alone, after k's turn (session 24: with a box and a test per lobe, the 11 ``unwrap`` calls
+    of the leaf-on pine's split of lobe 17 into 20 took 28 ms of CPU, now 12, on a loaded machine)."""
+    lo, hi = box
+    return ((q[None] > lo[:, None]) & (q[None] < hi[:, None])).all(axis=2)
 
 
 _PLAIN = ArrayMemo()

@@ -158,7 +158,7 @@ def straight_from(lobes: list[LobeState], j: int, centres: np.ndarray, mains: Br
         return None
     which = np.repeat(np.arange(len(centres)), [len(o) for o in orders])
     cand = np.concatenate(orders)
-    k = first_clear(lobes, j, verts[cand], centres[which], step, boxes(lobes))
+    k = first_clear(lobes, j, verts[cand], centres[which], step, boxes(lobes), cand)  # a vertex's start tested once
     if k < 0:
         return None
     return int(which[k]), _straight(verts[cand[k]], centres[which[k]], owner[cand[k]])
@@ -202,22 +202,23 @@ def _straight(start: np.ndarray, centre: np.ndarray, owner: np.ndarray) -> tuple
 
 
 def blocked(lobes: list[LobeState], j: int, a: np.ndarray, b: np.ndarray, step: float,
-             box: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+             box: tuple[np.ndarray, np.ndarray], start_ids: np.ndarray | None = None) -> np.ndarray:
     """(S,) bool: segments a[i] -> b[i] ((S, 3) each), sampled every ~``step``, with a sample inside a lobe
     other than ``j`` (``hullpack.segments_blocked``: every 4th sample first, and a segment stops at its first
-    sample inside: most blocked segments show it early)."""
+    sample inside: most blocked segments show it early; ``start_ids``: equal for equal starts ``a``)."""
     counts = _sample_counts(a, b, step)
-    bad, tests = segments_blocked(_packed(lobes)[0], box[0], box[1], j, a, b, counts)
+    bad, tests = segments_blocked(_packed(lobes)[0], box[0], box[1], j, a, b, counts, start_ids=start_ids)
     WORK["hull_tests"] += tests
     return bad
 
 
 def first_clear(lobes: list[LobeState], j: int, a: np.ndarray, b: np.ndarray, step: float,
-                box: tuple[np.ndarray, np.ndarray]) -> int:
+                box: tuple[np.ndarray, np.ndarray], start_ids: np.ndarray | None = None) -> int:
     """The first i whose segment a[i] -> b[i] ``blocked`` finds clear, -1 for none; the segments after it
     are not tried."""
     counts = _sample_counts(a, b, step)
-    bad, tests = segments_blocked(_packed(lobes)[0], box[0], box[1], j, a, b, counts, until_clear=True)
+    bad, tests = segments_blocked(_packed(lobes)[0], box[0], box[1], j, a, b, counts, until_clear=True,
+                                  start_ids=start_ids)
     WORK["hull_tests"] += tests
     return -1 if bad.all() else int(np.argmin(bad))
 
@@ -273,12 +274,12 @@ def bent_fallback(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndar
     order = _outside_first(lobes, j, verts, np.argsort(np.linalg.norm(verts - centre, axis=1)), tries, box)
     v = np.repeat(order, len(w))  # every (vertex, waypoint) pair, batch after batch
     ww = np.tile(w, (len(order), 1))
-    first = first_clear(lobes, j, verts[v], ww, step, box)  # its batch is the first with a clear pair
+    first = first_clear(lobes, j, verts[v], ww, step, box, v)  # its batch is the first with a clear pair
     if first < 0:
         return None
     size = batch * len(w)
     v, ww = v[first // size * size:][:size], ww[first // size * size:][:size]
-    bad = blocked(lobes, j, verts[v], ww, step, box)
+    bad = blocked(lobes, j, verts[v], ww, step, box, v)
     length = np.where(bad, np.inf, np.linalg.norm(ww - verts[v], axis=1) + np.linalg.norm(ww - centre, axis=1))
     k = int(np.argmin(length))
     a, b = verts[v[k]], ww[k]

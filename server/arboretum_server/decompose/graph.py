@@ -517,3 +517,13 @@ def weighted(adj: csr_matrix, node_weight: np.ndarray) -> csr_matrix:
     rows = np.repeat(np.arange(adj.shape[0]), np.diff(adj.indptr))
     w = adj.data * np.maximum(node_weight[rows], node_weight[adj.indices])
     return csr_matrix((w, adj.indices, adj.indptr), shape=adj.shape)
+
+
+def warm() -> None:
+    """Run every compiled loop here once on a two-node graph, with the dtypes the refinement passes (scipy's
+    int32 CSR arrays, int64 entry lists; see ``tetloops.warm``), the heap's loops called once themselves."""
+    adj = csr_matrix((np.array([1.0, 1.0]), (np.array([0, 1]), np.array([1, 0]))), shape=(2, 2))
+    rows = np.repeat(np.arange(2), np.diff(adj.indptr))
+    path_after_cut(adj, rows, np.array([0.0, 2.0]), np.flatnonzero(rows == 0), 0, 1)
+    hd, hn = np.zeros(2), np.zeros(2, np.int64)
+    _pop(hd, hn, _push(hd, hn, 0, 1.0, adj.indices[0]))

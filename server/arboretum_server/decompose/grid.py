@@ -89,3 +89,8 @@ def box_counts(points: np.ndarray, cell: float) -> np.ndarray:
         hit = cells[i] == want
         total[hit] += counts[i[hit]]
     return total[inverse.reshape(-1)]
+
+
+def warm() -> None:
+    """Run ``_query_kernel`` once on two points (see ``tetloops.warm``)."""
+    BoxGrid(np.array([[0.0, 0, 0], [1, 1, 1]]), 0.5).query(np.zeros((1, 3)))

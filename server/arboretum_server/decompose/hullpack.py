@@ -163,29 +163,54 @@ def inside_any(pack: HullPack, lo: np.ndarray, hi: np.ndarray, skip: int, q: np.
     """((M,) bool, hull tests): which ``q`` (M, 3) lie inside a hull of ``pack`` other than ``skip``, each
     hull tried only for points strictly inside its box (``lo``, ``hi`` (H, 3)) and only until one holds the
     point. The same answer as ``inside`` hull by hull; the count is of (point, hull) tests made."""
-    q = np.ascontiguousarray(q, dtype=np.float64).reshape(-1, 3)
+    q = _writable(q, np.float64).reshape(-1, 3)
     out = np.zeros(len(q), np.bool_)
     tests = _inside_any_kernel(pack.vertices, pack.faces, _cells(pack), pack.face_lo, pack.face_hi, pack.face_top,
-                               np.ascontiguousarray(lo, np.float64), np.ascontiguousarray(hi, np.float64),
-                               int(skip), q, out)
+                               _read_only(lo), _read_only(hi), int(skip), q, out)
     return out, int(tests)
 
 
 def segments_blocked(pack: HullPack, lo: np.ndarray, hi: np.ndarray, skip: int, start: np.ndarray, end: np.ndarray,
-                     counts: np.ndarray, stride: int = 4, until_clear: bool = False) -> tuple[np.ndarray, int]:
+                     counts: np.ndarray, stride: int = 4, until_clear: bool = False,
+                     start_ids: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """((S,) bool, hull tests): which segments ``start`` -> ``end`` ((S, 3) each), sampled at ``counts``
     (S,) evenly spaced points from end to end (``np.linspace``), have a sample inside a hull of ``pack``
     other than ``skip`` (as ``inside_any``). Each segment's every ``stride``-th sample is tried first,
     and a segment stops at its first sample inside a hull: the answer of testing every sample, for the
     work of the samples up to that one (the samples are made here, only as far as they are needed).
     ``until_clear``: the segments are tried in order up to the first clear one only (the callers that take
-    the first clear segment); the ones after it are left True, untried."""
+    the first clear segment); the ones after it are left True, untried.
+    ``start_ids`` (S,) ints >= 0, equal for segments with the same start (e.g. the main vertex's index): a
+    start's first sample is tested once (the same answers and counts); by default, runs of equal starts."""
+    ids = _NO_IDS if start_ids is None else _writable(start_ids, np.int64)
     out = np.zeros(len(start), np.bool_)
     tests = _segments_kernel(pack.vertices, pack.faces, _cells(pack), pack.face_lo, pack.face_hi, pack.face_top,
-                             np.ascontiguousarray(lo, np.float64), np.ascontiguousarray(hi, np.float64), int(skip),
-                             np.ascontiguousarray(start, np.float64), np.ascontiguousarray(end, np.float64),
-                             np.ascontiguousarray(counts, np.int64), int(stride), out, bool(until_clear))
+                             _read_only(lo), _read_only(hi), int(skip), _writable(start, np.float64),
+                             _writable(end, np.float64), _writable(counts, np.int64), int(stride), out,
+                             bool(until_clear), ids, int(ids.max()) + 1 if len(ids) else len(start))
     return out, int(tests)
+
+
+_NO_IDS = np.zeros(0, np.int64)
+"""``_segments_kernel``'s start ids when the caller gives none: runs of equal starts, numbered in the kernel."""
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    """``a`` as a C-contiguous float64 array, read only (a view when it is writable): the boxes come read only
+    from ``clear._packed`` and writable from callers that pass their own, and numba compiles a kernel once
+    per kind, so the kernels see one kind only (the one ``warm`` compiles)."""
+    a = np.ascontiguousarray(a, np.float64)
+    if a.flags.writeable:
+        a = a.view()
+        a.flags.writeable = False
+    return a
+
+
+def _writable(a: np.ndarray, dtype: type) -> np.ndarray:
+    """``a`` as a C-contiguous array of ``dtype``, writable (a copy when it is read only, as shared arrays are):
+    the kernels' one compiled kind for the queries (see ``_read_only``)."""
+    a = np.ascontiguousarray(a, dtype)
+    return a if a.flags.writeable else a.copy()
 
 
 def _cells(pack: HullPack) -> tuple:
@@ -239,23 +264,35 @@ hull filter (they stray by an ulp or so: 1e-15 m at tree scale)."""
 
 @njit(cache=True)
 def _segments_kernel(v, f, cells, flo, fhi, ftop, lo, hi, skip, start, end, counts, stride, out,
-                     until_clear) -> int:  # pragma: no cover
+                     until_clear, ids, n_ids) -> int:  # pragma: no cover
     tests = np.zeros(1, np.int64)
     near = np.zeros(lo.shape[0], np.int64)
-    # the last first sample tested, its answer and its hull tests: a point's answer and tests depend on the point
-    # alone (the hulls tried are those whose box strictly holds it, all among the near hulls of any segment
-    # through it), and bent_fallback tries each main vertex with 32 waypoints in a row (session 24)
-    last = np.full(3, np.nan)
-    last_tests = np.zeros(1, np.int64)
-    last_in = False
+    # each start's first-sample answer (0: not tried, 1: inside, 2: outside) and hull tests, by its id: a point's
+    # answer and tests depend on the point alone (the hulls tried are those whose box strictly holds it, all
+    # among the near hulls of any segment through it); bent_fallback tries each main vertex with 32 waypoints
+    # in a row, straight_from the same 64 vertices for up to 32 centres (session 24)
+    known = np.zeros(n_ids, np.int8)
+    known_tests = np.zeros(n_ids, np.int64)
+    scratch = np.zeros(1, np.int64)
+    run = 0
     for s in range(start.shape[0]):
         if until_clear and s > 0 and not out[s - 1]:
             out[s:] = True
             break
+        if s > 0 and not (start[s, 0] == start[s - 1, 0] and start[s, 1] == start[s - 1, 1]
+                          and start[s, 2] == start[s - 1, 2]):
+            run += 1  # no ids given: a run of equal starts shares one
+        g, c = ids[s] if ids.shape[0] else run, counts[s]
+        cached = c >= 2  # sample 0 is the start itself (t = 0: a NaN or infinite end makes it another point)
+        for ax in range(3):
+            cached = cached and start[s, ax] + 0.0 * (end[s, ax] - start[s, ax]) == start[s, ax]
+        if cached and known[g] == 1:  # blocked at its start: sample 0 is tried first, whatever the near hulls
+            tests[0] += known_tests[g]
+            out[s] = True
+            continue
         n_near = _hulls_near(lo, hi, skip, start[s], end[s], near)
         if n_near == 0:
             continue  # no sample can lie in a hull's box: clear, and no hull tried (as sample by sample)
-        c = counts[s]
         inv = 1.0 / (c - 1)
         for phase in range(2):  # every stride-th sample, then the rest
             for i in range(c):
@@ -265,16 +302,16 @@ def _segments_kernel(v, f, cells, flo, fhi, ftop, lo, hi, skip, start, end, coun
                 x = start[s, 0] + t * (end[s, 0] - start[s, 0])
                 y = start[s, 1] + t * (end[s, 1] - start[s, 1])
                 z = start[s, 2] + t * (end[s, 2] - start[s, 2])
-                if i > 0:
+                if i > 0 or not cached:
                     out[s] = _sample_inside(v, f, cells, flo, fhi, ftop, lo, hi, near, n_near, x, y, z, tests)
                 else:
-                    if not (x == last[0] and y == last[1] and z == last[2]):
-                        last[0], last[1], last[2] = x, y, z
-                        last_tests[0] = 0
-                        last_in = _sample_inside(v, f, cells, flo, fhi, ftop, lo, hi, near, n_near, x, y, z,
-                                                 last_tests)
-                    tests[0] += last_tests[0]
-                    out[s] = last_in
+                    if known[g] == 0:
+                        scratch[0] = 0
+                        inside = _sample_inside(v, f, cells, flo, fhi, ftop, lo, hi, near, n_near, x, y, z, scratch)
+                        known[g] = 1 if inside else 2
+                        known_tests[g] = scratch[0]
+                    tests[0] += known_tests[g]
+                    out[s] = known[g] == 1
                 if out[s]:
                     break
             if out[s]:
@@ -315,3 +352,22 @@ def _hulls_near(lo, hi, skip, a, b, near) -> int:  # pragma: no cover
             near[n] = k
             n += 1
     return n
+
+
+def warm() -> None:
+    """Run every compiled loop here once on a tetrahedron, with the dtypes the refinement passes (see
+    ``tetloops.warm``): the public calls first, then the loops they call inside their kernels, called
+    once themselves so numba loads (or compiles) each now, not in a user's first refinement."""
+    v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    pack = join_packs([pack_hull(v, np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]))])
+    lo, hi = _read_only(v.min(axis=0)[None] - 1.0), _read_only(v.max(axis=0)[None] + 1.0)
+    q = np.full((1, 3), 0.1)
+    inside_any(pack, lo, hi, -1, q)
+    segments_blocked(pack, lo, hi, -1, q, q + 0.1, np.array([3]), until_clear=True)
+    args = (pack.vertices, pack.faces, _cells(pack), pack.face_lo, pack.face_hi, pack.face_top)
+    tests, near = np.zeros(1, np.int64), np.zeros(1, np.int64)
+    _cell(pack.grid, 0, 0.1, 0)
+    _hull_holds(*args, 0, 0.1, 0.1, 0.1)
+    _point_inside(*args, lo, hi, -1, 0.1, 0.1, 0.1, tests)
+    _hulls_near(lo, hi, -1, q[0], q[0] + 0.1, near)
+    _sample_inside(*args, lo, hi, near, 1, 0.1, 0.1, 0.1, tests)

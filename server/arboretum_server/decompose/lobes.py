@@ -367,3 +367,15 @@ def _crossing_kernel(v: np.ndarray, f: np.ndarray, q: np.ndarray, out: np.ndarra
         zmax[t] = max(v[f[t, 0], 2], v[f[t, 1], 2], v[f[t, 2], 2])
     for i in range(q.shape[0]):
         out[i] = _crossings_of(v, f, 0, f.shape[0], lo, hi, zmax, q[i, 0], q[i, 1], q[i, 2])
+
+
+def warm() -> None:
+    """Run every compiled loop here once on a tetrahedron (see ``tetloops.warm``): ``inside``'s kernel, then the
+    loops it calls, called once themselves (``face_crossing`` with the int64 faces ``hullpack`` passes it)."""
+    v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int64)
+    inside(v, f, np.full((1, 3), 0.1))
+    lo, hi, top = np.zeros((4, 2)), np.ones((4, 2)), np.ones(4)
+    _crossings_of(v, f, 0, 4, lo, hi, top, 0.1, 0.1, 0.1)
+    face_crossing(v, f, 0, 0.1, 0.1, 0.1)
+    _side(v, 0, 1, 0.1, 0.1)

@@ -114,3 +114,8 @@ def smooth_branchset(kept: BranchSet, tree: cKDTree | None = None, iterations: i
         add_branch(out, s, p, pv)
     out.raw_full = [kept.reference(b) for b in range(len(kept.full))]
     return out
+
+
+def warm() -> None:
+    """Run ``_smooth_kernel`` once on a three-vertex polyline (see ``tetloops.warm``)."""
+    smooth_polylines([np.array([[0.0, 0, 0], [0, 0, 1], [0, 0, 2]])], np.full(3, 0.01))

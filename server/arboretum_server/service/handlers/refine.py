@@ -27,7 +27,9 @@ from arboretum_server.service.sessions import RefineDraft, Session
 EDITS = ("remove_lobe", "insert_lobe", "merge_lobes", "split_lobe")
 WARM = ("arboretum_server.decompose.refine", "sklearn.cluster", "arboretum_server.decompose.examples",
         "arboretum_server.decompose.tetloops", "arboretum_server.decompose.merge",
-        "arboretum_server.decompose.similarity")
+        "arboretum_server.decompose.similarity", "arboretum_server.decompose.hullpack",
+        "arboretum_server.decompose.graph", "arboretum_server.decompose.grid", "arboretum_server.decompose.lobes",
+        "arboretum_server.decompose.smooth")
 MAX_SPLIT_STROKES = 100
 """Strokes of one split (one new lobe each; k-means with that many centres runs in the server's loop)."""
 
