@@ -73,8 +73,16 @@ over the ground each: 10 % of it at the default band) or more under the ground: 
 groundless tree's lowest branch layer goes down 18-24 % of the height, but a trunk mirrored in a
 puddle, a root plate seen 0.5-0.8 m under the ground, or a post in a hole, under a 10 m tree, reach
 10-16 slices and were refused as trunks (helper-151: 8 of 24 mirrored trunks, 2 of 3 root plates). A
-lowest layer 9 % of the height up or more still reaches it; a post or a root plate 1.2 m under a 10 m
-tree does too, and is refused."""
+lowest layer 9 % of the height up or more still reaches it; a post 1.2 m under a 10 m tree's ground
+does too, and is refused (a root plate that deep no longer is: ``_plate``)."""
+GROUND_PLATE = 2.0
+"""``_plate``: a column under a ground whose foot spreads this many times wider than the same
+column over the ground is no trunk going on below it (a root plate 0.25 wide under a trunk 0.1 wide,
+1.2-1.5 m under a 10 m tree's ground, had the ground refused in 7 of 10 draws)."""
+GROUND_UNSEEN = 5
+"""``_trunk_below``'s foot (its lowest 15 slices) does not count the empty slices of a stretch of this
+many or more (a trunk unseen for a stretch; a trunk of 300 points 20 tall, 1.35 a slice, leaves 5 empty
+in a row about once in a thousand)."""
 GROUND_APART = 0.1
 """At most this share of the points, set apart under the rest by a gap in z of ``GROUND_DIP`` of the
 height or more, is looked past first (``_apart_below``): a clump of 2 % of scan 10's points 10 % of the
@@ -289,7 +297,11 @@ def _search(pts: np.ndarray, band_frac: float) -> Found:
     small ground were the minima of most columns and stretched the span (scan 10, its ground 2.5 m wide,
     with 1-3 % uniform outliers: its ground was kept, the root 4 m under it); when so many outliers hold
     each other that the held points reach the floor too, with more of them held (``GROUND_HELD_MORE``).
-    When that finds none either,
+    A ground found whose cut leaves points within its band (``_left_in_band``: it followed dips down
+    chains of outliers) among many scattered points is searched for again by the held search, which is
+    taken when its cut leaves fewer. A cloud too narrow for the held points (``GROUND_NARROW``), or whose
+    first surface is a ground but for the points below it (``_buried``: a sparse wide ground among
+    outliers), is searched with fewer held (``_narrow_surface``). When that finds none either,
     the first search's surface holding fewer than ``GROUND_SHARE`` of the points (``_surface`` keeps
     it; it is not searched for again) is taken after all: the floor of
     outliers strewn under a tree with no ground, cut with the strays below the tree (scan 07 with
@@ -303,7 +315,7 @@ def _search(pts: np.ndarray, band_frac: float) -> Found:
     inside = (pts[:, 2] >= lo) & (pts[:, 2] <= hi)
     body = pts if inside.all() else pts[inside]
     order, first = _columns_low_first(body[:, :2], body[:, 2], GROUND_CELL * h)
-    found, sparse = _surface(pts, body[order[first]], band_frac, inside, h)
+    found, sparse, under = _surface(pts, body[order[first]], band_frac, inside, h)
     if found[1] is not None and _on_strays(body, order, first, found[1], band_frac * h / 2):
         held_found = _held_surface(pts, body, order, first, band_frac, lo, hi)
         low, tol = body[order[first]], band_frac * h / 2
@@ -313,9 +325,15 @@ def _search(pts: np.ndarray, band_frac: float) -> Found:
             found = held_found
     elif found[1] is None:
         found = _held_surface(pts, body, order, first, band_frac, lo, hi)
+    elif _left_in_band(pts, found, band_frac * h / 2) and _many_scattered(pts):
+        held_found = _held_surface(pts, body, order, first, band_frac, lo, hi)
+        if held_found[1] is not None and \
+                _left_in_band(pts, held_found, band_frac * h / 2) < _left_in_band(pts, found, band_frac * h / 2):
+            found = held_found
     if found[1] is None and sparse is None:  # no surface refused only for its share: maybe a mirror
         found = _mirror_surface(pts, body[order[first]], band_frac, inside, lo, hi)
-    if found[1] is None and first.sum() < GROUND_NARROW:
+    if found[1] is None and (first.sum() < GROUND_NARROW
+                             or sparse is None and _buried(pts, under, band_frac, inside)):
         found = _narrow_surface(pts, body, band_frac, lo, hi)
     if found[1] is None and sparse is not None:  # no ground but maybe the sparse floor of strays under the tree
         found = sparse
@@ -337,6 +355,16 @@ def _on_strays(body: np.ndarray, order: np.ndarray, first: np.ndarray, ground: G
     low = body[order[first]]
     on = np.abs(low[:, 2] - ground.height(low[:, :2])) < tol
     return bool(on.any() and (_minima_held(body[:, 2], order, first, tol) & on).sum() < GROUND_HELD_SHARE * on.sum())
+
+
+def _left_in_band(pts: np.ndarray, found: Found, tol: float) -> int:
+    """How many points of ``pts`` (N, 3) within ``tol`` of the ground of ``found`` (its cut mask and
+    ``Ground``) its cut leaves: a cut following its columns' dips (``_dips``) down chains of outliers
+    1.8-2.6 under a 10 m wide ground among 10 % uniform outliers left 43-274 of its 3,000 points, read
+    as flat patches of other trunks (6 of 40 draws refused, 1 rooted 2.4 off); ``_search`` then tries the
+    held search, which counts only held points below a ground and needs no dips there."""
+    mask, ground = found
+    return int((~mask & (np.abs(pts[:, 2] - ground.height(pts[:, :2])) < tol)).sum())
 
 
 def _alike(ground: Ground, other: Ground, low: np.ndarray, tol: float) -> bool:
@@ -404,8 +432,8 @@ def _mirror_surface(pts: np.ndarray, low: np.ndarray, band_frac: float, inside: 
 
 
 def _narrow_surface(pts: np.ndarray, body: np.ndarray, band_frac: float, lo: float, hi: float) -> Found:
-    """``find_ground``'s last held try, on a narrow cloud (under ``GROUND_NARROW`` columns) with many
-    scattered points (``_many_scattered``): ``_held_at`` with each of ``GROUND_HELD_FEW`` points held,
+    """``find_ground``'s last held try, on a narrow cloud (under ``GROUND_NARROW`` columns), or one whose
+    first surface is a ground but for the points below it (``_buried``), with many scattered points (``_many_scattered``): ``_held_at`` with each of ``GROUND_HELD_FEW`` points held,
     in columns as wide as ``GROUND_CELL`` of the span, then half that, over the span of the points with
     each of those counts held in columns half as wide, when they lie a column width or more above the
     cloud's floor ``lo`` (``body``: the points of ``pts`` within ``lo`` to ``hi``). A thinned cloud's
@@ -530,17 +558,18 @@ def _held_at(pts: np.ndarray, span: tuple[float, float], band_frac: float, k: in
         return np.zeros(len(pts), bool), None
     counted = np.zeros(len(pts), bool)
     counted[np.flatnonzero(inside)[order]] = True
-    found, _ = _surface(pts, body[order[first]], band_frac, inside, h, counted)
+    found, _, _ = _surface(pts, body[order[first]], band_frac, inside, h, counted)
     return found if found[1] is not None else (np.zeros(len(pts), bool), None)
 
 
 def _surface(pts: np.ndarray, low: np.ndarray, band_frac: float, inside: np.ndarray,
-             h: float, counted: np.ndarray | None = None) -> tuple[Found, Found | None]:
+             h: float, counted: np.ndarray | None = None) -> tuple[Found, Found | None, np.ndarray | None]:
     """(N,) bool ground points of ``pts`` (N, 3) and the ``Ground`` through the column samples ``low``
     (M, 3), or no points and None (``find_ground``; ``h``: the height the scales come from; ``counted``:
-    (N,) bool, the points counted below a ground, all when None); and the
+    (N,) bool, the points counted below a ground, all when None); the
     first surface refused only for holding under ``GROUND_SHARE`` of the points, or None
-    (``find_ground``'s last resort: found here once, not searched for again).
+    (``find_ground``'s last resort: found here once, not searched for again); and the first surface's
+    heights under ``pts`` (N,), or None when no surface was fitted (``_buried`` reads them).
 
     The ground is ``ground_plane``, or ``ground_curve`` when that fits ``GROUND_GAIN`` more of the
     column minima or the plane is refused: accepted (``_cut``) when at most ``GROUND_BELOW`` of the
@@ -549,16 +578,32 @@ def _surface(pts: np.ndarray, low: np.ndarray, band_frac: float, inside: np.ndar
     dips of its columns (``_dips``: a ditch), if then at most ``GROUND_BELOW`` of the points lie
     ``GROUND_DIP`` of the height or more below it.
     """
-    sparse = None
+    sparse, first = None, None
     for ground, under in _candidates(pts, low, band_frac, h, counted):
+        first = under if first is None else first
         cut = _cut(pts, under, band_frac, inside, counted)
         if cut is None:
             continue
         if cut[1]:
-            return (cut[0], ground), sparse
+            return (cut[0], ground), sparse, first
         if sparse is None:
             sparse = cut[0], ground
-    return (np.zeros(len(pts), bool), None), sparse
+    return (np.zeros(len(pts), bool), None), sparse, first
+
+
+def _buried(pts: np.ndarray, under: np.ndarray | None, band_frac: float, inside: np.ndarray) -> bool:
+    """Whether the first search's first surface (its heights ``under`` (N,) ``pts`` (N, 3), or None) is a
+    ground but for the points below it (``_cut`` with none of them counted, ``GROUND_SHARE`` held): a
+    sparse ground (3,000 points 30 wide under a 20 m pine, about one a column) among 10-20 % uniform
+    outliers, 1.3-2.7 % of the points strewn under it, whose columns hold too few points for ``held``;
+    ``_search`` then tries ``_narrow_surface`` on it as on a narrow cloud."""
+    if under is None:
+        return False
+    up = pts[:, 2] - under
+    if not _below(up < -band_frac * float(up[inside].max()) / 2, None):  # refused for something else (quick)
+        return False
+    cut = _cut(pts, under, band_frac, inside, np.zeros(len(pts), bool))
+    return cut is not None and cut[1]
 
 
 def _candidates(pts: np.ndarray, low: np.ndarray, band_frac: float, h: float,
@@ -695,18 +740,19 @@ def _cut(pts: np.ndarray, under: np.ndarray, band_frac: float, inside: np.ndarra
 def _trunk_below(pts: np.ndarray, up: np.ndarray, step: float, wide: float) -> bool:
     """Whether the trunk goes on under a ground, down to its own foot (``_cut``; ``up``: (N,) heights of
     ``pts`` (N, 3) above it, ``step``: a slice's thickness, ``wide``: the ground's spread): the points
-    under the band reach ``GROUND_TRUNK_DEEP`` slices down, the 15 lowest slices of them (the foot), at
-    least 10 points, are a column wider than none (a plumb line's repeated xy) and narrower than a
+    under the band reach ``GROUND_TRUNK_DEEP`` slices down, the 15 lowest slices of them (the foot,
+    ``_lowest_slices``: a stretch of ``GROUND_UNSEEN`` empty slices or more not counted), at least 10 points, are a column wider than none (a plumb line's repeated xy) and narrower than a
     ground (under ``wide`` / ``GROUND_WIDER``), the points within twice its spread of its axis rise from
     it to the band with no gap of 15 slices, and the same column holds at least 10 points in slices 3-17
-    above the ground, as many as the foot within a factor of 1 / ``GROUND_TRUNK``. Strays under a ground
+    above the ground, as many as the foot within a factor of 1 / ``GROUND_TRUNK``, and the foot spreads
+    under ``GROUND_PLATE`` times as wide as that column (``_plate``: a root plate). Strays under a ground
     (outliers, multipath echoes) spread over its whole area, a clump apart from it leaves a gap, the
     bottom of a hollow or a ditch has no trunk over it; a trunk mirrored in a puddle or a root plate
     seen under the ground does not reach so deep."""
     under = np.flatnonzero(up < -1.5 * step)
     if len(under) < 10 or up[under].min() > -GROUND_TRUNK_DEEP * step:
         return False
-    foot = pts[under[up[under] < up[under].min() + 15 * step]]
+    foot = pts[under[_lowest_slices(up[under], step, 15)]]
     spread = _spread(foot)
     if len(foot) < 10 or not 0 < spread < wide / GROUND_WIDER:  # strays spread like the ground over its area
         return False
@@ -719,5 +765,29 @@ def _trunk_below(pts: np.ndarray, up: np.ndarray, step: float, wide: float) -> b
     rise = np.sort(up[column(under)])
     if np.diff(np.r_[rise, -1.5 * step]).max() >= 15 * step:
         return False
-    trunk = len(column(high))  # none over the bottom of a hollow
-    return trunk >= 10 and GROUND_TRUNK * trunk <= len(foot) <= trunk / GROUND_TRUNK
+    over = column(high)
+    trunk = len(over)  # none over the bottom of a hollow
+    if not (trunk >= 10 and GROUND_TRUNK * trunk <= len(foot) <= trunk / GROUND_TRUNK):
+        return False
+    return not _plate(pts, foot, over)
+
+
+def _plate(pts: np.ndarray, foot: np.ndarray, over: np.ndarray) -> bool:
+    """Whether the column under a ground (its ``foot`` (F, 3), and ``over``: the indices of ``pts`` (N, 3)
+    in the same column 3-17 slices over the ground) is no trunk of the tree over it (``_trunk_below``):
+    its foot spreads ``GROUND_PLATE`` times wider than the column over the ground (a root plate under
+    the trunk). A groundless tree's trunk under its lowest branch layer spreads like the trunk over it."""
+    return bool(_spread(foot) > GROUND_PLATE * _spread(pts[over]))
+
+
+def _lowest_slices(up: np.ndarray, step: float, k: int) -> np.ndarray:
+    """(M,) bool: the heights ``up`` (M,) in the lowest ``k`` slices ``step`` thick from their lowest, the
+    empty slices of a stretch of ``GROUND_UNSEEN`` or more not counted (``_trunk_below``'s foot: a
+    groundless layered tree's trunk unseen 0.5-1.3 m up left its lowest 15 slices, from its foot,
+    22-54 points against 56-70 over the layer, and the layer was cut as the ground). Without such a
+    stretch: the lowest ``k`` slices."""
+    slab = np.floor((up - up.min()) / step).astype(np.int64)
+    held = np.unique(slab)
+    empty = np.diff(held) - 1
+    counted = held - np.r_[0, np.cumsum(np.where(empty >= GROUND_UNSEEN, empty, 0))]
+    return slab <= held[counted < k].max()
