@@ -315,23 +315,19 @@ def _search(pts: np.ndarray, band_frac: float) -> Found:
     inside = (pts[:, 2] >= lo) & (pts[:, 2] <= hi)
     body = pts if inside.all() else pts[inside]
     order, first = _columns_low_first(body[:, :2], body[:, 2], GROUND_CELL * h)
-    found, sparse, under = _surface(pts, body[order[first]], band_frac, inside, h)
-    if found[1] is not None and _on_strays(body, order, first, found[1], band_frac * h / 2):
-        held_found = _held_surface(pts, body, order, first, band_frac, lo, hi)
-        low, tol = body[order[first]], band_frac * h / 2
-        held = _minima_held(body[:, 2], order, first, tol)
-        if held_found[1] is not None and not _alike(found[1], held_found[1], low, tol) \
-                and _carried(held_found[1], low[held], tol) >= HELD_GAIN * max(_carried(found[1], low[held], tol), 1):
-            found = held_found
-    elif found[1] is None:
+    low, tol = body[order[first]], band_frac * h / 2  # the column minima; half the band
+    found, sparse, under = _surface(pts, low, band_frac, inside, h)
+    if found[1] is None:
         found = _held_surface(pts, body, order, first, band_frac, lo, hi)
-    elif _left_in_band(pts, found, band_frac * h / 2) and _many_scattered(pts):
+    elif _on_strays(body, order, first, found[1], tol):
+        held = low[_minima_held(body[:, 2], order, first, tol)]
+        found = _held_instead(found, _held_surface(pts, body, order, first, band_frac, lo, hi), low, held, tol)
+    elif (left := _left_in_band(pts, found, tol)) and _many_scattered(pts):
         held_found = _held_surface(pts, body, order, first, band_frac, lo, hi)
-        if held_found[1] is not None and \
-                _left_in_band(pts, held_found, band_frac * h / 2) < _left_in_band(pts, found, band_frac * h / 2):
+        if held_found[1] is not None and _left_in_band(pts, held_found, tol) < left:
             found = held_found
     if found[1] is None and sparse is None:  # no surface refused only for its share: maybe a mirror
-        found = _mirror_surface(pts, body[order[first]], band_frac, inside, lo, hi)
+        found = _mirror_surface(pts, low, band_frac, inside, lo, hi)
     if found[1] is None and (first.sum() < GROUND_NARROW
                              or sparse is None and _buried(pts, under, band_frac, inside)):
         found = _narrow_surface(pts, body, band_frac, lo, hi)
@@ -383,6 +379,16 @@ through two pines' patches carried 2.6-27 times as many as the plane tilted thro
 outliers' floor (8-34 against 0-11); over a sparse ground, whose minima few points hold, the plane the held
 search fits through shrubs' and the trunk's feet carried 0.02-1.1 times the sparse ground's, and taken, it
 moved 7 of 60 right grounds 0.013-0.078 of the height off (helper-172)."""
+
+
+def _held_instead(found: Found, held_found: Found, low: np.ndarray, held: np.ndarray, tol: float) -> Found:
+    """``held_found`` (the held search's) instead of ``found`` (on strays: ``_on_strays``) when it is another
+    ground (not ``_alike`` over the column minima ``low`` (M, 3)) carrying ``HELD_GAIN`` times as many of the
+    held minima ``held`` (K, 3) within ``tol`` (``_carried``); else ``found``."""
+    if held_found[1] is None or _alike(found[1], held_found[1], low, tol):
+        return found
+    gain = _carried(held_found[1], held, tol) >= HELD_GAIN * max(_carried(found[1], held, tol), 1)
+    return held_found if gain else found
 
 
 def _carried(ground: Ground, low: np.ndarray, tol: float) -> int:

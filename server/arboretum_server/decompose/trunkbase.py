@@ -491,9 +491,7 @@ clumps differ by 1.66-2.04 in one of them, helper-172)."""
 
 def _peaked(xy: np.ndarray) -> bool:
     """Whether the plan positions ``xy`` (M, 2) crowd their centre (``PEAKED``): a blob, not a disc or ring."""
-    a = np.c_[2.0 * xy, np.ones(len(xy))]
-    centre = np.linalg.lstsq(a, (xy ** 2).sum(axis=1), rcond=None)[0][:2]
-    d = np.linalg.norm(xy - centre, axis=1)
+    d = _from_circle(xy)
     m = float(np.median(d))
     core = (d < PEAK_CORE * m).sum() / PEAK_CORE ** 2
     ring = ((d > 0.8 * m) & (d < 1.2 * m)).sum() / (1.2 ** 2 - 0.8 ** 2)
@@ -504,11 +502,10 @@ def _like_trunk(piece: np.ndarray, xy: np.ndarray, rest: np.ndarray, root: np.nd
     """Whether ``piece`` (M, 3) (``xy`` (M, 2): its plan along the trunk's lean) is as wide and as dense per
     unit height as the trunk rising from ``root`` (3,) in ``rest`` (K, 3) (``_axis_at``'s points, within
     ``TRUNK_LIKE``): that trunk's foot."""
-    near = rest[(rest[:, 2] >= root[2]) & (rest[:, 2] <= root[2] + AXIS_SLAB * h)
-                & (np.linalg.norm(rest[:, :2] - root[:2], axis=1) < AXIS_SLAB * h)]
-    if len(near) < BASE_MIN or np.ptp(near[:, 2]) <= LINK * h:
+    near = _trunk_slab(rest, root, h)
+    if near is None:
         return False
-    fit = np.array([np.polyval(np.polyfit(near[:, 2], near[:, i], 1), near[:, 2]) for i in (0, 1)]).T
+    fit = np.array([np.polyval(line, near[:, 2]) for line in _axis_line(near)]).T
     wide = plan_radius(np.c_[xy, piece[:, 2]], 90) / max(float(np.percentile(np.linalg.norm(near[:, :2] - fit, axis=1), 90)), 1e-12)
     lo, hi = np.percentile(piece[:, 2], [10, 90])
     dense = 0.8 * len(piece) / max(float(hi - lo), 1e-12) / (len(near) / float(np.ptp(near[:, 2])))
@@ -528,10 +525,16 @@ def _filled(xy: np.ndarray) -> bool:
     """Whether the plan positions ``xy`` (M, 2) of a piece fill a disc rather than lie on a ring: ``FILLED_SHARE``
     of them or more lie within ``HOLLOW_CORE`` of the median distance from the centre of the circle fitted
     to them (an algebraic fit: a half-seen foot's arc finds its centre)."""
+    d = _from_circle(xy)
+    return bool((d < HOLLOW_CORE * np.median(d)).mean() >= FILLED_SHARE)
+
+
+def _from_circle(xy: np.ndarray) -> np.ndarray:
+    """(M,) distances of the plan positions ``xy`` (M, 2) from the centre of the circle fitted to them (an
+    algebraic fit: a half-seen foot's arc finds its centre): ``_filled``'s and ``_peaked``'s reading."""
     a = np.c_[2.0 * xy, np.ones(len(xy))]
     centre = np.linalg.lstsq(a, (xy ** 2).sum(axis=1), rcond=None)[0][:2]
-    d = np.linalg.norm(xy - centre, axis=1)
-    return bool((d < HOLLOW_CORE * np.median(d)).mean() >= FILLED_SHARE)
+    return np.linalg.norm(xy - centre, axis=1)
 
 
 def _axis_at(rest: np.ndarray, root: np.ndarray, h: float, z: float) -> np.ndarray:
@@ -539,11 +542,24 @@ def _axis_at(rest: np.ndarray, root: np.ndarray, h: float, z: float) -> np.ndarr
     straight line x(z), y(z) fitted on its points within ``AXIS_SLAB`` of the height ``h`` above and
     beside the root, carried down; the root's own position when they are under ``BASE_MIN`` or span
     under ``LINK`` of the height."""
+    near = _trunk_slab(rest, root, h)
+    if near is None:
+        return root[:2]
+    return np.array([np.polyval(line, z) for line in _axis_line(near)])
+
+
+def _trunk_slab(rest: np.ndarray, root: np.ndarray, h: float) -> np.ndarray | None:
+    """The points of ``rest`` (K, 3) within ``AXIS_SLAB`` of the height ``h`` above and beside ``root`` (3,):
+    the trunk's foot that ``_axis_at`` and ``_like_trunk`` read; None when under ``BASE_MIN`` of them or
+    spanning under ``LINK`` of the height."""
     near = rest[(rest[:, 2] >= root[2]) & (rest[:, 2] <= root[2] + AXIS_SLAB * h)
                 & (np.linalg.norm(rest[:, :2] - root[:2], axis=1) < AXIS_SLAB * h)]
-    if len(near) < BASE_MIN or np.ptp(near[:, 2]) <= LINK * h:
-        return root[:2]
-    return np.array([np.polyval(np.polyfit(near[:, 2], near[:, i], 1), z) for i in (0, 1)])
+    return None if len(near) < BASE_MIN or np.ptp(near[:, 2]) <= LINK * h else near
+
+
+def _axis_line(near: np.ndarray) -> list[np.ndarray]:
+    """The straight lines x(z) and y(z) (polynomial coefficients) fitted on the points ``near`` (K, 3)."""
+    return [np.polyfit(near[:, 2], near[:, i], 1) for i in (0, 1)]
 
 
 def _climbs(q: np.ndarray, at: int, top: float, r: float) -> bool:
