@@ -321,11 +321,19 @@ there fill at most this share of the ``GROUND_TOL``-thin slices between (a tread
 crown's flank or a trunk fills them all)."""
 
 
+TREAD_HELD = 3
+"""... and it holds at least this many points from half a ``GROUND_BAND`` up through the level's band (5
+until session 25: with the ground 3 heights out, 40,000 points, a column holds about 10, and a sparse
+column's middle tread and the level over it held 4; left out of the band, they widened the trunk's slice
+of the harmonic apple and cherry at the top of a flight of 8 % steps going down)."""
+
+
 def _treads(up: np.ndarray, column: np.ndarray, rise: np.ndarray, height: float) -> np.ndarray:
     """(N,) bool: the treads a ``_flight`` column holds between its ground and its neighbour's level
     (``rise``), left out as ground: its points from half a ``GROUND_BAND`` up to that level fill at most
-    ``TREAD_FILL`` of the ``GROUND_TOL``-thin slices there, and nothing stands on them (the band over the
-    level's band holds under a tenth as many points); the level's band goes with them. Where the ground
+    ``TREAD_FILL`` of the ``GROUND_TOL``-thin slices there (``TREAD_HELD`` points at least), and nothing
+    stands on them (the band over the level's band holds under a tenth as many points); the level's band
+    goes with them. Where the ground
     reaches 3 heights out, a column is 0.12 heights wide and holds two or three treads 6 % deep:
     ``_upper_level`` took only the neighbour's level, the treads under it stayed out of the band and
     widened the foot slice (scan 06 at the top of a flight going down: Z -0.13 against Y 0.45 written Z
@@ -344,7 +352,7 @@ def _treads(up: np.ndarray, column: np.ndarray, rise: np.ndarray, height: float)
     room = np.maximum((rise - tol - 0.5 * band) / tol, 1.0)  # slices from half a band to the level
     held = np.bincount(column[own | level], minlength=count)
     free = 10 * np.bincount(column[over], minlength=count) < held  # nothing stands on the treads
-    ok = (filled <= TREAD_FILL * room) & free & (held >= 5)
+    ok = (filled <= TREAD_FILL * room) & free & (held >= TREAD_HELD)
     return (own | level) & ok[column]
 
 

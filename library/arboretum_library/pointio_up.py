@@ -24,7 +24,7 @@ from .pointio_ground import (
     _spread,
     ground_band,
 )
-from .pointio_wall import _wall, _wall_on_ground
+from .pointio_wall import _wall_on_ground, _walls_beside
 from .repeats import distinct_rows
 
 __all__ = [
@@ -75,22 +75,22 @@ def guess_up(points: np.ndarray) -> UpGuess:
     no ground at either end is left out of that axis's score, and the other axis, when ground was found
     along it, loses its bonus: the wall's length read as a tree's height turned it on its side, and a
     wall facing the other axis is a smooth, gentle surface that ``ground_band`` takes for ground (session
-    21: 292 of helper-140's 1,728 wall files wrong, 27 now). Trees are taller than wide, narrow at the
-    foot and round in plan. X is never a candidate; a tie goes to Z. See docs/scan-input.md for limits.
+    21: 292 of helper-140's 1,728 wall files wrong, 27 now). Such a wall is taken only when the other
+    axis's ground is gone without it (``_walls_beside``: else it is that ground seen edge on); with none
+    taken, a wall standing on the ground of an axis is left out of that axis's score (``_wall_on_ground``,
+    sessions 24-25). Trees are taller than wide, narrow at the foot and round in plan. X is never a
+    candidate; a tie goes to Z. See docs/scan-input.md for limits.
     """
     pts = _sample(points)
     z_way, s_z, z_ground, z_any, z_bonus = _way_up(pts, 2)
     y_way, s_y, _, y_any, y_bonus = _way_up(pts, 1)
-    if not (z_any and y_any):  # ground along one axis at most: it may be a wall beside the tree
-        wall = np.zeros(len(pts), dtype=bool)
-        for axis, any_ground in ((2, z_any), (1, y_any)):
-            if not any_ground:
-                wall |= _wall(pts, axis)
-        if wall.any():  # scored without the wall; an axis whose "ground" it was loses the bonus
-            s_z = s_z - z_bonus if z_any else _upright_score(pts[~wall], 2, None)
-            s_y = s_y - y_bonus if y_any else _upright_score(pts[~wall], 1, None)
-    else:  # ground along both: one may be the face of a wall standing on the other
-        standing = _wall_on_ground(pts, ((2, z_way, z_bonus), (1, y_way, y_bonus)))
+    axes = ((2, z_way, z_bonus, z_any), (1, y_way, y_bonus, y_any))
+    wall = _walls_beside(pts, axes) if not (z_any and y_any) else None
+    if wall is not None:  # scored without the wall; an axis whose "ground" it was loses the bonus
+        s_z = s_z - z_bonus if z_any else _upright_score(pts[~wall], 2, None)
+        s_y = s_y - y_bonus if y_any else _upright_score(pts[~wall], 1, None)
+    else:  # a wall may stand on one axis's ground (its face the other's ground, if that has any)
+        standing = _wall_on_ground(pts, axes)
         if standing is not None:  # scored without the wall, its ground found again
             axis, rest = standing
             score = _upright_score(rest, axis, _ground(rest, axis))

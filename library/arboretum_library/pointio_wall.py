@@ -24,13 +24,20 @@ WALL_TRIES, WALL_SAMPLE, WALL_KEEP = 100, 4000, 20
 core holds, and leaves, at least this many points."""
 
 
+WALL_MORE = 300
+"""... and this many lines more, drawn after those (the first ``WALL_TRIES`` are the lines tried until
+session 25). Both points of a line lie on a wall holding a tenth of the lower half's points once in 100
+tries, so 100 lines miss it 37 times in 100 and 400 lines twice (helper-179: a wall 3 heights long on
+stairs beside scan 07 or the harmonic cherry was missed; 8 of 264 stairs-and-wall files more read right)."""
+
+
 def _wall(pts: np.ndarray, axis: int) -> np.ndarray:
     """(N,) bool: the points of a wall (or a fence) standing along ``axis`` beside the tree, all False
     when none. On ``WALL_SAMPLE`` points drawn at random (fixed; with repeats; all of a smaller cloud),
     the line in the footprint across ``axis`` holding the most of the lower half's points within a quarter
-    of ``WALL_BAND`` (``WALL_TRIES`` lines through two of them) is a wall when that thin band holds
-    ``WALL_SHARE`` of the points and ``WALL_THIN`` of those within ``WALL_BAND`` (a wall is thin; a slice
-    of crown is not), and 90 % of them lie in the lowest ``WALL_LOW`` of the extent along ``axis`` (a wall
+    of ``WALL_BAND`` (``WALL_TRIES`` + ``WALL_MORE`` lines through two of them) is a wall when that thin band
+    holds ``WALL_SHARE`` of the points and ``WALL_THIN`` of those within ``WALL_BAND`` (a wall is thin; a
+    slice of crown is not), and 90 % of them lie in the lowest ``WALL_LOW`` of the extent along ``axis`` (a wall
     is lower than the tree; a row's trunks are not). Its points there are the wall (a crown may reach over
     it). A wall has at least ``WALL_KEEP`` points in its core and leaves as many to score."""
     none = np.zeros(len(pts), dtype=bool)
@@ -44,6 +51,8 @@ def _wall(pts: np.ndarray, axis: int) -> np.ndarray:
     if len(low) < WALL_KEEP or not hi > lo:
         return none
     a, b = low[rng.integers(0, len(low), WALL_TRIES)], low[rng.integers(0, len(low), WALL_TRIES)]
+    a = np.concatenate([a, low[rng.integers(0, len(low), WALL_MORE)]])  # the first lines as before
+    b = np.concatenate([b, low[rng.integers(0, len(low), WALL_MORE)]])
     d = b - a
     norm = np.hypot(d[:, 0], d[:, 1])
     if not (norm > 0).any():
@@ -68,18 +77,44 @@ that axis's ground band is the ground seen edge on, not a wall (the pine scan's 
 3 heights long standing on stairs: 0.44-0.72)."""
 
 
+def _walls_beside(pts: np.ndarray, axes: tuple) -> np.ndarray | None:
+    """(N,) bool: the walls (``_wall``) standing along the axes without ground at either end (``axes``: (axis,
+    way up, ``GROUND_BONUS`` in its score, ground at either end) for Z and Y, ground along one at most),
+    None when there is none. A wall found along one axis while the other has ground under it is taken
+    only when that ground is gone without it (``_ground_was_face``: it was the wall's face); else it is
+    that ground's lowest level seen edge on (stairs along Y, the wall facing X: seen along Y the flat
+    ground below the flight is a thin line low along Y, and Z lost its bonus: 45 of 88 files wrong)."""
+    wall = np.zeros(len(pts), dtype=bool)
+    for k, (axis, _, _, any_ground) in enumerate(axes):
+        if any_ground:
+            continue
+        found = _wall(pts, axis)
+        if found.any() and _ground_was_face(pts, found, axes[1 - k]):
+            wall |= found
+    return wall if wall.any() else None
+
+
+def _ground_was_face(pts: np.ndarray, wall: np.ndarray, other: tuple) -> bool:
+    """Whether the ground under the ``other`` axis ((axis, way up, ``GROUND_BONUS``, ground at either end))
+    was the face of ``wall``: none is left under it without the wall (True when it had no bonus to lose)."""
+    axis, way, bonus, _ = other
+    return not bonus or _ground(_turned(pts, axis, way)[~wall], axis) is None
+
+
 def _wall_on_ground(pts: np.ndarray, axes: tuple) -> tuple[int, np.ndarray] | None:
-    """(axis, cloud) of the one axis (``axes``: (axis, way up, ``GROUND_BONUS`` in its score), both with
-    ground at some end) with ground under it along which a wall stands beside the tree (``_wall``, the
-    cloud turned that way up; not ``WALL_GROUNDED`` in its ground band) whose other axis has no ground
-    left without it (that ground was the wall's face), and the cloud turned that way up without the wall
-    (``guess_up`` scores it, its ground found again); None when there is none, or one along each (ground
-    seen edge on may pass for a wall: which is which is not told). Stairs beside a wall 3 heights long
-    facing Y: seen along Y the wall's face is ground, so the wall search did not run, and the wall kept in
-    Z's score (its length the crown's width, its foot the trunk's) read the tree on its side (helper-154's
-    80 files: 70 wrong)."""
+    """(axis, cloud) of the one axis (``axes``: (axis, way up, ``GROUND_BONUS`` in its score, ground at
+    either end) for Z and Y) with ground under it along which a wall stands beside the tree (``_wall``,
+    the cloud turned that way up; not ``WALL_GROUNDED`` in its ground band) whose other axis has no ground
+    left without it (that ground was the wall's face; an axis without ground at either end has none to
+    lose), and the cloud turned that way up without the wall (``guess_up`` scores it, its ground found
+    again); None when there is none, or one along each (ground seen edge on may pass for a wall: which is
+    which is not told). Stairs beside a wall 3 heights long facing Y: seen along Y the wall's face is
+    ground, so the wall search did not run, and the wall kept in Z's score (its length the crown's width,
+    its foot the trunk's) read the tree on its side (helper-154's 80 files: 70 wrong). The same stairs
+    along Y, the wall facing X, leave Y without ground: the wall standing on Z's is looked for too (session
+    25)."""
     found = []
-    for k, (axis, way, bonus) in enumerate(axes):
+    for k, (axis, way, bonus, _) in enumerate(axes):
         if not bonus:
             continue
         turned = _turned(pts, axis, way)
@@ -89,8 +124,8 @@ def _wall_on_ground(pts: np.ndarray, axes: tuple) -> tuple[int, np.ndarray] | No
         ground = _ground(turned, axis)  # not None: the bonus is for it
         if ground is None or (wall & ground).sum() >= WALL_GROUNDED * wall.sum():
             continue
-        other, other_way, _ = axes[1 - k]
-        if _ground(_turned(pts, other, other_way)[~wall], other) is not None:
+        other, other_way, _, other_any = axes[1 - k]
+        if other_any and _ground(_turned(pts, other, other_way)[~wall], other) is not None:
             continue  # the other axis's ground was not the wall's face
         found.append((axis, turned[~wall]))
     return found[0] if len(found) == 1 else None
