@@ -18,6 +18,7 @@ from .clear import (
     bent_fallback,
     blocked,
     boxes,
+    first_clear,
     foreign,
     inside_foreign,
     straight_from,
@@ -166,7 +167,8 @@ def along(lobes: list[LobeState], n_kept: int, j: int, branch: tuple[np.ndarray,
     from) to one of its vertices, then straight to ``j``'s centre: the shortest such route clear of every
     other lobe, else one bent through one of ``j``'s points (``_along_bent``: or ending there, its new
     centre), else one clear of the lobes before ``n_kept`` with the new lobes it enters carved out of it
-    (``carve_route``, at most ``ROUTES_TRIED``); True (``lobes`` updated in place) when one clears ``j``.
+    (``carve_route``, at most ``ROUTES_TRIED``), else one bent through a waypoint in the open round ``j``'s
+    centre (``_along_free``, session 25); True (``lobes`` updated in place) when one clears ``j``.
 
     The split lobe's branch stayed out of every other lobe and ends inside the pieces, so it reaches pieces
     that no straight, bent or routed branch from the main branches reaches clear: a pine's lobe split in 20
@@ -190,8 +192,71 @@ def along(lobes: list[LobeState], n_kept: int, j: int, branch: tuple[np.ndarray,
     clear = [seg for seg in routes if not foreign(lobes, j, seg, tol, (lo, hi))]
     in_way = lobes_entered(lobes, [k for k in range(n_kept, len(lobes)) if k != j],
                            [sample_polylines([s], step) for s in clear]) if clear else np.zeros(0, int)
-    return any(carve_route(lobes, n_kept, j, (clear[i], branch[1], branch[2]), pts, o, step)
-               for i in np.argsort(in_way, kind="stable")[:ROUTES_TRIED])
+    if any(carve_route(lobes, n_kept, j, (clear[i], branch[1], branch[2]), pts, o, step)
+           for i in np.argsort(in_way, kind="stable")[:ROUTES_TRIED]):
+        return True
+    free = _along_free(lobes, j, branch[0], tol, box)
+    if free is not None:
+        lobes[j] = replace(lobes[j], segment=free, parent=branch[1], parent_vertex=branch[2])
+    return free is not None
+
+
+FREE_REACH = (0.025, 0.05, 0.1)
+"""Distances (0.8 m scale) from a piece's centre of the waypoints ``_along_free`` bends through."""
+FREE_DIRECTIONS = 32
+"""Directions (a Fibonacci sphere) of ``_along_free``'s waypoints at each distance."""
+
+
+def _sphere(m: int) -> np.ndarray:
+    """(m, 3) unit vectors spread evenly over the sphere (a Fibonacci lattice)."""
+    i = np.arange(m) + 0.5
+    z = 1.0 - 2.0 * i / m
+    r, t = np.sqrt(1.0 - z * z), np.pi * (1.0 + 5.0 ** 0.5) * i
+    return np.stack([r * np.cos(t), r * np.sin(t), z], axis=1)
+
+
+def _along_free(lobes: list[LobeState], j: int, seg: np.ndarray, tol: float, box,
+                step: float = 0.005) -> np.ndarray | None:
+    """``along``'s last resort: ``seg`` (the split lobe's branch) to its vertex v, then to a waypoint in the
+    open round lobe ``j``'s centre (``FREE_DIRECTIONS`` at each of the ``FREE_REACH`` distances, outside
+    every other lobe, with a clear leg to the centre), then to the centre: the shortest clear such route, or
+    None (at most ``ROUTES_TRIED`` candidates checked whole).
+
+    Session 25 (helper-178): 6 of 783 probe splits (the leaf-on pine's lobes 3, 6 and 22 in 20) left 9
+    pieces that every route along the split lobe's branch reached through a sibling piece of 6-14 points
+    (too few to carve, ``carve_route``) or a kept lobe, and whose own points lay behind those siblings,
+    so their routed branches ran 2.4-3.5 cm deep through the kept lobe round the trunk; each lay open on
+    its far side, and a waypoint 2.5-10 cm out there was reached clear (1.4-2.0 ms of CPU a piece)."""
+    centre = lobes[j].centre
+    w = (centre + np.asarray(FREE_REACH)[:, None, None] * _sphere(FREE_DIRECTIONS)).reshape(-1, 3)
+    w = w[~inside_foreign(lobes, j, w, box)]
+    w = w[~blocked(lobes, j, w, np.broadcast_to(centre, w.shape), step, box)]
+    seg = np.asarray(seg, np.float64)
+    ok = _clear_prefix(lobes, j, seg, tol, box)
+    if not len(w) or not ok:
+        return None
+    v, b = np.repeat(np.arange(ok), len(w)), np.tile(w, (ok, 1))
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(seg, axis=0), axis=1))])[v]
+    order = np.argsort(arc + np.linalg.norm(b - seg[v], axis=1) + np.linalg.norm(b - centre, axis=1), kind="stable")
+    for _ in range(ROUTES_TRIED):
+        k = first_clear(lobes, j, seg[v[order]], b[order], step, box, v[order])
+        if k < 0:
+            return None
+        i = order[k]
+        route = np.vstack([seg[: v[i]], resample_step(np.stack([seg[v[i]], b[i]]), 0.01),
+                           resample_step(np.stack([b[i], centre]), 0.01)[1:]])
+        if not foreign(lobes, j, route, tol, box):
+            return route
+        order = order[k + 1:]
+    return None
+
+
+def _clear_prefix(lobes: list[LobeState], j: int, seg: np.ndarray, tol: float, box) -> int:
+    """How many of ``seg``'s first vertices stay out of every lobe but ``j``."""
+    ok = 0
+    while ok < len(seg) and not foreign(lobes, j, seg[: ok + 1], tol, box):
+        ok += 1
+    return ok
 
 
 def _along_bent(lobes: list[LobeState], j: int, seg: np.ndarray, pts: np.ndarray, tol: float, box,
@@ -205,9 +270,7 @@ def _along_bent(lobes: list[LobeState], j: int, seg: np.ndarray, pts: np.ndarray
     w = own[:: max(1, len(own) // waypoints)]
     w = w[~inside_foreign(lobes, j, w, box)]
     seg = np.asarray(seg, np.float64)
-    ok = 0
-    while ok < len(seg) and not foreign(lobes, j, seg[: ok + 1], tol, box):
-        ok += 1
+    ok = _clear_prefix(lobes, j, seg, tol, box)
     if not len(w) or not ok:
         return None
     v = np.repeat(np.arange(ok), len(w))
