@@ -88,15 +88,15 @@ def test_a_band_of_scattered_points_is_still_no_trunk_base():
 def test_a_dense_base_band_is_clustered_on_a_sample_with_the_same_clusters():
     # a million-point cloud with --points 0 filled the band with 30,000 points, whose pairs within 2 %
     # of the height took 9 GB; a band over LINK_MAX points is clustered on a sample of them
-    from arboretum_server.decompose import trunkbase
+    from arboretum_server.decompose import trunkbase_links
 
     rng = np.random.default_rng(0)
     h = 10.0
     trunks = [np.c_[c + rng.uniform(-0.1, 0.1, (6000, 2)), rng.uniform(0, 0.3, 6000)] for c in ((0, 0), (3, 0))]
     stray = np.array([[1.5, 5.0, 0.1]])  # far from every point
     band = np.vstack([*trunks, stray])
-    assert len(band) > trunkbase.LINK_MAX
-    lab = trunkbase._link(band, trunkbase.LINK * h)
+    assert len(band) > trunkbase_links.LINK_MAX
+    lab = trunkbase_links._link(band, trunkbase_links.LINK * h)
     assert len(set(lab[:6000])) == 1 and len(set(lab[6000:12000])) == 1
     assert len({lab[0], lab[6000], lab[-1]}) == 3
     assert np.bincount(lab).max() == 6000

@@ -10,7 +10,7 @@ resort, the outliers' sparse floor, is the first search's, not searched for a se
 import numpy as np
 import pytest
 
-import arboretum_server.decompose.ground as ground_module
+import arboretum_server.decompose.ground_surface as ground_surface
 from arboretum_server.decompose.ground import find_ground
 from arboretum_server.decompose.trunkbase import find_root
 from factories import prepared_root, real_scan, strewn
@@ -56,8 +56,8 @@ def test_the_last_resort_reuses_the_first_search(monkeypatch):
     # once (plane: first search and held pass; before, a third time for the last resort)
     pts, _ = real_scan("07")
     calls = []
-    plane = ground_module.ground_plane
-    monkeypatch.setattr(ground_module, "ground_plane", lambda *a: calls.append(1) or plane(*a))
+    plane = ground_surface.ground_plane
+    monkeypatch.setattr(ground_surface, "ground_plane", lambda *a: calls.append(1) or plane(*a))
     ground, surface = find_ground(np.r_[pts, strewn(pts, 0.02, 0)], 0.015)
     assert surface is not None and ground[:len(pts)].sum() == 0
     assert len(calls) == 2

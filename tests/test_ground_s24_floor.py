@@ -82,7 +82,7 @@ def test_a_ground_over_chains_of_outliers_is_cut_whole(square, seed):
 
 
 def test_the_foot_skips_a_stretch_unseen_only():
-    from arboretum_server.decompose.ground import _lowest_slices
+    from arboretum_server.decompose.ground_cut import _lowest_slices
 
     step = 0.1
     even = np.arange(40) * step + 0.05

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from arboretum_library.errors import InputError
-from arboretum_server.decompose.trunkbase import _dense_start
+from arboretum_server.decompose.trunkbase_links import _dense_start
 from factories import prepared_root, strewn
 
 

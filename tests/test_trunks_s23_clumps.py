@@ -10,7 +10,8 @@ above the root and carried down to the piece: measured at the root itself, the f
 import numpy as np
 import pytest
 
-from arboretum_server.decompose.trunkbase import _axis_at, detached, find_root, under
+from arboretum_server.decompose.trunkbase import detached, find_root, under
+from arboretum_server.decompose.trunkbase_piece import _axis_at
 from factories import layered_tree, prepared_root, real_scan
 
 

@@ -11,7 +11,7 @@ from the tree: a clump 5 % of the height under the foot touches the 3 % floor.
 import numpy as np
 import pytest
 
-import arboretum_server.decompose.trunkbase as tb
+import arboretum_server.decompose.trunkbase_piece as piece
 from arboretum_server.decompose.trunkbase import detached, find_root, under
 from factories import prepared_root, real_scan
 from test_trunks_s23_clumps import _clump, _cylinder, _leaning
@@ -56,10 +56,10 @@ def test_a_blob_fills_and_a_ring_does_not():
     a = rng.uniform(0, 2 * np.pi, 200)
     ring = np.c_[np.cos(a), np.sin(a)] * (1 + rng.normal(0, 0.03, 200))[:, None]
     half = ring[ring[:, 0] < 0] + [5.0, 3.0]  # a foot seen from one side: its arc finds the centre
-    assert (tb.HOLLOW_CORE, tb.FILLED_SHARE) == (0.4, 0.04)
-    assert abs(_core_share(blob) - 0.105) < 0.01 and tb._filled(blob)
-    assert _core_share(ring) == 0.0 and not tb._filled(ring)
-    assert _core_share(half) == 0.0 and not tb._filled(half)
+    assert (piece.HOLLOW_CORE, piece.FILLED_SHARE) == (0.4, 0.04)
+    assert abs(_core_share(blob) - 0.105) < 0.01 and piece._filled(blob)
+    assert _core_share(ring) == 0.0 and not piece._filled(ring)
+    assert _core_share(half) == 0.0 and not piece._filled(half)
 
 
 def test_a_leaning_foot_is_measured_along_the_axis():
@@ -67,7 +67,7 @@ def test_a_leaning_foot_is_measured_along_the_axis():
     # seen across the axis's slope it is a ring and stays the root
     rng = np.random.default_rng(3)
     foot, trunk = _cylinder(rng, 0.0, 1.0, 0.2, 300, 30), _cylinder(rng, 3.0, 12.0, 0.2, 3000, 30)
-    assert tb._filled(foot[:, :2])
+    assert piece._filled(foot[:, :2])
     assert under(foot, trunk, find_root(trunk), 20.0)
 
 

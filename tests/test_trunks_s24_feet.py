@@ -17,8 +17,9 @@
 import numpy as np
 import pytest
 
-import arboretum_server.decompose.trunkbase as tb
+import arboretum_server.decompose.trunkbase_piece as piece
 from arboretum_server.decompose.ground import find_ground
+from arboretum_server.decompose.trunkbase import find_root
 from factories import prepared_root
 
 
@@ -89,20 +90,20 @@ def test_peaked_tells_a_blob_from_a_disc_and_a_ring():
     a = rng.uniform(0, 2 * np.pi, 2000)
     disc = np.c_[np.cos(a), np.sin(a)] * np.sqrt(rng.uniform(0, 1, (2000, 1)))
     ring = np.c_[np.cos(a), np.sin(a)] * (1 + rng.normal(0, 0.4, 2000))[:, None]  # noise 40 % of the radius
-    assert (tb.PEAKED, tb.PEAK_CORE) == (1.2, 0.6)
-    assert tb._filled(blob) and tb._peaked(blob)
-    assert tb._filled(disc) and not tb._peaked(disc)
-    assert tb._filled(ring) and not tb._peaked(ring)
+    assert (piece.PEAKED, piece.PEAK_CORE) == (1.2, 0.6)
+    assert piece._filled(blob) and piece._peaked(blob)
+    assert piece._filled(disc) and not piece._peaked(disc)
+    assert piece._filled(ring) and not piece._peaked(ring)
 
 
 def test_like_trunk_compares_width_and_density_with_the_trunk_above():
     rng = np.random.default_rng(0)
     trunk = _trunk(rng, 0.04, 3000, 0.0, 0.03, z1=3.0) + [0, 0, 0.5]
-    root = tb.find_root(trunk)
+    root = find_root(trunk)
     foot = _trunk(rng, 0.04, 100, 0.0, 0.03, z1=0.1)  # as many points per metre, as wide
     blob = rng.normal(0, 0.15, (100, 3)) * [1, 1, 0.3]  # 3 times as wide
-    assert tb._like_trunk(foot, foot[:, :2], trunk, root, 3.5)
-    assert not tb._like_trunk(blob, blob[:, :2], trunk, root, 3.5)
+    assert piece._like_trunk(foot, foot[:, :2], trunk, root, 3.5)
+    assert not piece._like_trunk(blob, blob[:, :2], trunk, root, 3.5)
 
 
 def _sparse_ground_tree(seed: int) -> tuple[np.ndarray, float]:
