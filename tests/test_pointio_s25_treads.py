@@ -1,5 +1,5 @@
 """``--up auto`` on a tree at the top of a flight of 8 % steps going down, the ground 3 heights out
-(session 25, helper-179).
+(session 25, helper-177).
 
 A ground column is then 0.12 heights wide and, with 40,000 ground points, holds about 10 of them: two or
 three treads. ``_treads`` leaves a column's own treads under its neighbour's level out with the ground

@@ -1,5 +1,5 @@
 """``--up auto`` on a tree by a flight of steps running along Y with a long wall facing X, and on terraces
-whose levels run along Y (session 25, helper-179).
+whose levels run along Y (session 25, helper-177).
 
 The mirror of session 24's case (stairs along X, a wall facing Y) read wrong: turned a quarter about the
 up axis, Y has no ground, so the search for a wall along an axis without ground ran, and seen along Y the

@@ -1,4 +1,4 @@
-"""Session 24 (helper-174): ``hullpack.segments_blocked`` tests each start's first sample once per call, by a start
+"""Session 24 (helper-172): ``hullpack.segments_blocked`` tests each start's first sample once per call, by a start
 id (``clear.straight_from`` passes each pair's main vertex: ``tunnel.moved_centre`` asks for up to 32 centres from
 the same 64 vertices; ``bent_fallback`` its vertex x waypoint pairs), and a segment whose start is known to lie
 in a foreign hull is blocked at once: the answers and hull-test counts of testing sample by sample."""

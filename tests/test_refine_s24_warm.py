@@ -1,4 +1,4 @@
-"""Session 24 (helper-174): the service warms every compiled loop a refinement runs when it starts
+"""Session 24 (helper-172): the service warms every compiled loop a refinement runs when it starts
 (``dispatch.warm_up``, handlers/refine.py ``WARM``): hullpack, graph, grid, lobes and smooth had no ``warm()``, so
 a user's first refinement after a start loaded or compiled them itself (8.9 s of compilation on the toy tree
 with numba's cache empty). Each ``warm()`` must compile the dtypes the refinement passes: a refinement after

@@ -1,4 +1,4 @@
-"""Every piece of a split reaches its centre clear (session 25, helper-178).
+"""Every piece of a split reaches its centre clear (session 25, helper-176).
 
 Session 23's probe (134 splits of 5 trees into 20-100 pieces) left 2 splits with a piece whose branch ran
 2.8-3.5 cm deep (0.8 m scale) through a kept lobe: the leaf-on pine's lobes 6 and 22 split in 20. Every

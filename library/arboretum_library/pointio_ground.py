@@ -5,7 +5,7 @@ Here: the grid of columns across the axis and the smooth, gentle surface of thei
 (multipath under it left out), hummocky ground on a coarser grid (``_rough_ground``, ``_relief``), the
 upper level of a terrace's edge (``_steps``) and of a flight of steps (``_flight``, ``_treads``), grass
 (``_grass_top``), and two measures ``pointio_up`` and ``pointio_wall`` share (``_spread``,
-``_largest_extent``). Split out of ``pointio_up`` in session 24 (helper-175).
+``_largest_extent``). Split out of ``pointio_up`` in session 24 (helper-173).
 """
 
 from __future__ import annotations

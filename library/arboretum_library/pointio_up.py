@@ -5,7 +5,7 @@ Here: the decision and the shapes it scores along each axis (``_way_up``, ``_upr
 wide, narrow at the foot, round in plan; ``_upside_down``: ground at the top end with a trunk on it). The
 ground under an axis is read by ``pointio_ground`` (``ground_band``, re-exported here), a wall or a fence
 beside the tree by ``pointio_wall``. Split out of ``pointio_spatial`` (session 19), which keeps the trunk
-base, thinning and spacing; ``pointio`` re-exports both. Split in three in session 24 (helper-175).
+base, thinning and spacing; ``pointio`` re-exports both. Split in three in session 24 (helper-173).
 """
 
 from __future__ import annotations

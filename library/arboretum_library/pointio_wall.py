@@ -2,7 +2,7 @@
 ``_wall_on_ground`` (a wall standing on the ground of one axis whose face the other axis took for ground).
 
 ``pointio_up.guess_up`` scores an axis without the wall found here: a wall's length read as a tree's
-height turned it on its side. Split out of ``pointio_up`` in session 24 (helper-175).
+height turned it on its side. Split out of ``pointio_up`` in session 24 (helper-173).
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ core holds, and leaves, at least this many points."""
 WALL_MORE = 300
 """... and this many lines more, drawn after those (the first ``WALL_TRIES`` are the lines tried until
 session 25). Both points of a line lie on a wall holding a tenth of the lower half's points once in 100
-tries, so 100 lines miss it 37 times in 100 and 400 lines twice (helper-179: a wall 3 heights long on
+tries, so 100 lines miss it 37 times in 100 and 400 lines twice (helper-177: a wall 3 heights long on
 stairs beside scan 07 or the harmonic cherry was missed; 8 of 264 stairs-and-wall files more read right)."""
 
 

@@ -222,7 +222,7 @@ def _along_free(lobes: list[LobeState], j: int, seg: np.ndarray, tol: float, box
     every other lobe, with a clear leg to the centre), then to the centre: the shortest clear such route, or
     None (at most ``ROUTES_TRIED`` candidates checked whole).
 
-    Session 25 (helper-178): 6 of 783 probe splits (the leaf-on pine's lobes 3, 6 and 22 in 20) left 9
+    Session 25 (helper-176): 6 of 783 probe splits (the leaf-on pine's lobes 3, 6 and 22 in 20) left 9
     pieces that every route along the split lobe's branch reached through a sibling piece of 6-14 points
     (too few to carve, ``carve_route``) or a kept lobe, and whose own points lay behind those siblings,
     so their routed branches ran 2.4-3.5 cm deep through the kept lobe round the trunk; each lay open on
