@@ -122,12 +122,12 @@ def _run_counted(monkeypatch, fn, reference: bool) -> tuple[object, int, int]:
 
             for mod in (clear, carve, secondary, tunnel):
                 m.setattr(mod, "inside_foreign", ref)
-            def blocked(lobes, j, a, b, step, box, start_ids=None):  # ids: session 24, a speed-up only
+            def blocked(lobes, j, a, b, step, box, start_ids=None, pairs=None):  # ids, pairs: speed-ups only
                 return _reference_blocked(lobes, j, a, b, step, box, tests)
 
             m.setattr(clear, "blocked", blocked)
 
-            def first_clear(lobes, j, a, b, step, box, start_ids=None):  # session 23: the repairs' first-clear calls
+            def first_clear(lobes, j, a, b, step, box, start_ids=None, pairs=None):  # session 23: the first-clear calls
                 bad = _reference_blocked(lobes, j, a, b, step, box, tests)
                 return -1 if bad.all() else int(np.argmin(bad))
 

@@ -22,6 +22,7 @@ from operator import attrgetter, is_
 
 import numpy as np
 
+from .blockers import Blockers, Pairs, own_rows
 from .hullpack import HullPack, inside_any, join_packs, pack_hull, segments_blocked
 from .memo import ArrayMemo
 from .merge import BranchSet, resample_step
@@ -100,6 +101,15 @@ def boxes(lobes: list[LobeState]) -> tuple[np.ndarray, np.ndarray]:
     return _packed(lobes)[1]
 
 
+def kept_boxes(lobes: list[LobeState], n_kept: int) -> tuple[np.ndarray, np.ndarray]:
+    """The lobes' boxes with every box from ``n_kept`` on emptied (lo inf, hi -inf): a test against them tries
+    the lobes before ``n_kept`` alone, in the same order and with the same hull tests as one against the list
+    of those lobes (and any lobe it skips) would, without packing that list's hulls again (session 25)."""
+    lo, hi = (b.copy() for b in boxes(lobes))
+    lo[n_kept:], hi[n_kept:] = np.inf, -np.inf
+    return lo, hi
+
+
 def inside_foreign(lobes: list[LobeState], j: int, q: np.ndarray,
                    box: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """(M,) bool: which of the points ``q`` (M, 3) lie inside a lobe other than ``j`` (a lobe is tested
@@ -147,34 +157,41 @@ def straight_fallback(lobes: list[LobeState], j: int, mains: BranchSet, tries: i
 
 
 def straight_from(lobes: list[LobeState], j: int, centres: np.ndarray, mains: BranchSet, tries: int = 64,
-                  step: float = 0.005) -> tuple[int, tuple[np.ndarray, int, int]] | None:
+                  step: float = 0.005, own: tuple[np.ndarray, np.ndarray] | None = None,
+                  ) -> tuple[int, tuple[np.ndarray, int, int]] | None:
     """(k, branch): the first of the ``centres`` (C, 3) that ``straight_fallback`` reaches with a straight
     branch were it lobe ``j``'s centre (its hull unchanged), and that branch; None if none is reached. One
     ``first_clear`` call over every (centre, vertex) pair in that order: before session 23 a ``blocked`` call
-    per 8 vertices of each centre (``tunnel.moved_centre`` tries up to 32 centres)."""
+    per 8 vertices of each centre (``tunnel.moved_centre`` tries up to 32 centres). ``own``: (each centre's
+    position among lobe ``j``'s members, the points they index) when the centres are its own points (the known
+    blockers name them so, ``Pairs``)."""
     verts, owner = main_vertices(mains)
     orders = _nearest_each(verts, centres, tries)
     if not sum(map(len, orders)):
         return None
     which = np.repeat(np.arange(len(centres)), [len(o) for o in orders])
     cand = np.concatenate(orders)
-    k = first_clear(lobes, j, verts[cand], centres[which], step, boxes(lobes), cand)  # a vertex's start tested once
+    pairs = Pairs(verts, cand, centres, which, *(own or (None, None)))
+    k = first_clear(lobes, j, verts[cand], centres[which], step, boxes(lobes), cand, pairs=pairs)  # a start once
     if k < 0:
         return None
     return int(which[k]), _straight(verts[cand[k]], centres[which[k]], owner[cand[k]])
 
 
 def straight_routes(lobes: list[LobeState], j: int, mains: BranchSet, tries: int = 64,
-                    step: float = 0.005) -> list[tuple[np.ndarray, int, int]]:
+                    step: float = 0.005, box: tuple[np.ndarray, np.ndarray] | None = None,
+                    ) -> list[tuple[np.ndarray, int, int]]:
     """Every straight branch ``straight_fallback`` could give lobe ``j``: from each of the ``tries`` main-branch
     vertices nearest its centre whose segment stays out of foreign lobes, nearest first (the last resort
-    ``tunnel.behind`` chooses among them)."""
+    ``tunnel.behind`` chooses among them). ``box``: the lobes' boxes to test against (``boxes(lobes)`` by
+    default; a lobe whose box is emptied is left out, see ``kept_boxes``)."""
     centre = lobes[j].centre
     verts, owner = main_vertices(mains)
     order = _nearest_vertices(verts, centre, tries)
     if not len(order):
         return []
-    bad = blocked(lobes, j, verts[order], np.broadcast_to(centre, (len(order), 3)), step, boxes(lobes))
+    bad = blocked(lobes, j, verts[order], np.broadcast_to(centre, (len(order), 3)), step,
+                  boxes(lobes) if box is None else box, pairs=Pairs(verts, order, centre[None], np.zeros(len(order), int)))
     return [_straight(verts[i], centre, owner[i]) for i in order[~bad]]
 
 
@@ -202,25 +219,54 @@ def _straight(start: np.ndarray, centre: np.ndarray, owner: np.ndarray) -> tuple
 
 
 def blocked(lobes: list[LobeState], j: int, a: np.ndarray, b: np.ndarray, step: float,
-             box: tuple[np.ndarray, np.ndarray], start_ids: np.ndarray | None = None) -> np.ndarray:
+             box: tuple[np.ndarray, np.ndarray], start_ids: np.ndarray | None = None,
+             pairs: Pairs | None = None) -> np.ndarray:
     """(S,) bool: segments a[i] -> b[i] ((S, 3) each), sampled every ~``step``, with a sample inside a lobe
     other than ``j`` (``hullpack.segments_blocked``: every 4th sample first, and a segment stops at its first
-    sample inside: most blocked segments show it early; ``start_ids``: equal for equal starts ``a``)."""
-    counts = _sample_counts(a, b, step)
-    bad, tests = segments_blocked(_packed(lobes)[0], box[0], box[1], j, a, b, counts, start_ids=start_ids)
-    WORK["hull_tests"] += tests
-    return bad
+    sample inside: most blocked segments show it early; ``start_ids``: equal for equal starts ``a``).
+    ``pairs``: the same segments as ``Pairs`` (from main vertices): the hulls known to block them for lobe ``j``
+    are used and kept (``blockers.Blockers``)."""
+    return _segments(lobes, j, a, b, step, box, start_ids, pairs, False)
 
 
 def first_clear(lobes: list[LobeState], j: int, a: np.ndarray, b: np.ndarray, step: float,
-                box: tuple[np.ndarray, np.ndarray], start_ids: np.ndarray | None = None) -> int:
+                box: tuple[np.ndarray, np.ndarray], start_ids: np.ndarray | None = None,
+                pairs: Pairs | None = None) -> int:
     """The first i whose segment a[i] -> b[i] ``blocked`` finds clear, -1 for none; the segments after it
     are not tried."""
-    counts = _sample_counts(a, b, step)
-    bad, tests = segments_blocked(_packed(lobes)[0], box[0], box[1], j, a, b, counts, until_clear=True,
-                                  start_ids=start_ids)
-    WORK["hull_tests"] += tests
+    bad = _segments(lobes, j, a, b, step, box, start_ids, pairs, True)
     return -1 if bad.all() else int(np.argmin(bad))
+
+
+def _segments(lobes: list[LobeState], j: int, a: np.ndarray, b: np.ndarray, step: float,
+              box: tuple[np.ndarray, np.ndarray], start_ids: np.ndarray | None, pairs: Pairs | None,
+              until_clear: bool) -> np.ndarray:
+    """``blocked`` (or with ``until_clear``, ``first_clear``'s answers) with the known blockers of ``pairs``."""
+    counts = _sample_counts(a, b, step)
+    pack, own = _packed(lobes)
+    memo = None if pairs is None else Blockers.of(lobes[j], pairs.verts, step)
+    held = None if memo is None else own_rows(box, own, j)
+    prior = None if memo is None else memo.prior(lobes, j, held, pairs, _hull_index(lobes))
+    by = None if memo is None else np.full(len(a), -1, np.int64)
+    bad, tests = segments_blocked(pack, box[0], box[1], j, a, b, counts, until_clear=until_clear,
+                                  start_ids=start_ids, prior=prior, by=by)
+    WORK["hull_tests"] += tests
+    if memo is not None:
+        memo.keep(lobes, j, held, pairs, by)
+    return bad
+
+
+_INDEX: list = [None, {}]
+"""The hull vertex arrays of the lobes ``_packed`` was last asked about (its tuple) and the index of each by id."""
+
+
+def _hull_index(lobes: list[LobeState]) -> dict[int, int]:
+    """{id of a lobe's hull vertex array: its index} for ``lobes`` (the last lobes ``_packed`` was asked about;
+    built once per set of hulls)."""
+    verts = _LAST[0][2] if _LAST[0] is not None and len(_LAST[0][2]) == len(lobes) else tuple(map(_VERTICES, lobes))
+    if _INDEX[0] is not verts:
+        _INDEX[:] = [verts, {id(v): k for k, v in enumerate(verts)}]
+    return _INDEX[1]
 
 
 def _sample_counts(a: np.ndarray, b: np.ndarray, step: float) -> np.ndarray:
@@ -256,30 +302,36 @@ def _outside_first(lobes: list[LobeState], j: int, verts: np.ndarray, order: np.
 
 
 def bent_fallback(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, waypoints: int = 32,
-                  tries: int = 48, batch: int = 2, step: float = 0.005) -> tuple[np.ndarray, int, int] | None:
+                  tries: int = 48, batch: int = 2, step: float = 0.005,
+                  box: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, int, int] | None:
     """A two-piece secondary branch for lobe ``j``: main-branch vertex -> one of the lobe's own points ->
     lobe centre, both pieces clear of foreign lobes, through every (n // ``waypoints``)-th of the lobe's
     n points whose segment to the centre is clear. The ``tries`` main vertices nearest the centre that
     lie outside every foreign lobe are tested ``batch`` at a time, nearest first; the first batch with a
     clear route gives the shortest one. None if none has one. For lobes that no straight segment reaches
     (lobes around a pine's trunk). The pairs are tested in one ``first_clear`` call up to the first clear one,
-    then its batch in full (before session 23: a ``blocked`` call per batch, up to 24)."""
-    centre, box = lobes[j].centre, boxes(lobes)
+    then its batch in full (before session 23: a ``blocked`` call per batch, up to 24). ``box``: as in
+    ``straight_routes``."""
+    centre, box = lobes[j].centre, boxes(lobes) if box is None else box
     members = pts[lobes[j].members]
-    w = members[:: max(1, len(members) // waypoints)]
-    w = w[~blocked(lobes, j, w, np.broadcast_to(centre, w.shape), step, box)]
+    spacing = max(1, len(members) // waypoints)
+    every = members[::spacing]
+    at = np.flatnonzero(~blocked(lobes, j, every, np.broadcast_to(centre, every.shape), step, box))
+    w = every[at]
     if not len(w):
         return None
     verts, owner = main_vertices(mains)
     order = _outside_first(lobes, j, verts, np.argsort(np.linalg.norm(verts - centre, axis=1)), tries, box)
     v = np.repeat(order, len(w))  # every (vertex, waypoint) pair, batch after batch
     ww = np.tile(w, (len(order), 1))
-    first = first_clear(lobes, j, verts[v], ww, step, box, v)  # its batch is the first with a clear pair
-    if first < 0:
+    at = np.tile(at, len(order))  # each pair's waypoint among ``every``, which are members 0, spacing, ...
+    named = (np.arange(0, len(members), spacing), pts)
+    first = first_clear(lobes, j, verts[v], ww, step, box, v, pairs=Pairs(verts, v, every, at, *named))  # its batch:
+    if first < 0:  # the first with a clear pair
         return None
     size = batch * len(w)
-    v, ww = v[first // size * size:][:size], ww[first // size * size:][:size]
-    bad = blocked(lobes, j, verts[v], ww, step, box, v)
+    v, ww, at = (x[first // size * size:][:size] for x in (v, ww, at))
+    bad = blocked(lobes, j, verts[v], ww, step, box, v, pairs=Pairs(verts, v, every, at, *named))
     length = np.where(bad, np.inf, np.linalg.norm(ww - verts[v], axis=1) + np.linalg.norm(ww - centre, axis=1))
     k = int(np.argmin(length))
     a, b = verts[v[k]], ww[k]

@@ -172,7 +172,8 @@ def inside_any(pack: HullPack, lo: np.ndarray, hi: np.ndarray, skip: int, q: np.
 
 def segments_blocked(pack: HullPack, lo: np.ndarray, hi: np.ndarray, skip: int, start: np.ndarray, end: np.ndarray,
                      counts: np.ndarray, stride: int = 4, until_clear: bool = False,
-                     start_ids: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+                     start_ids: np.ndarray | None = None, prior: np.ndarray | None = None,
+                     by: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """((S,) bool, hull tests): which segments ``start`` -> ``end`` ((S, 3) each), sampled at ``counts``
     (S,) evenly spaced points from end to end (``np.linspace``), have a sample inside a hull of ``pack``
     other than ``skip`` (as ``inside_any``). Each segment's every ``stride``-th sample is tried first,
@@ -181,13 +182,19 @@ def segments_blocked(pack: HullPack, lo: np.ndarray, hi: np.ndarray, skip: int, 
     ``until_clear``: the segments are tried in order up to the first clear one only (the callers that take
     the first clear segment); the ones after it are left True, untried.
     ``start_ids`` (S,) ints >= 0, equal for segments with the same start (e.g. the main vertex's index): a
-    start's first sample is tested once (the same answers and counts); by default, runs of equal starts."""
+    start's first sample is tested once (the same answers and counts); by default, runs of equal starts.
+    ``prior`` (S,) ints: a hull known to hold one of segment i's samples, whose box here is its own and strictly
+    holds that sample (-1: none known): the segment is blocked, no hull tried (session 25: the repairs test the
+    same segments again after a carving that left the hull blocking them as it was). ``by`` (S,) ints, filled
+    when given: the hull holding the sample that blocked segment i (-1 for a clear or untried one)."""
     ids = _NO_IDS if start_ids is None else _writable(start_ids, np.int64)
     out = np.zeros(len(start), np.bool_)
     tests = _segments_kernel(pack.vertices, pack.faces, _cells(pack), pack.face_lo, pack.face_hi, pack.face_top,
                              _read_only(lo), _read_only(hi), int(skip), _writable(start, np.float64),
                              _writable(end, np.float64), _writable(counts, np.int64), int(stride), out,
-                             bool(until_clear), ids, int(ids.max()) + 1 if len(ids) else len(start))
+                             bool(until_clear), ids, int(ids.max()) + 1 if len(ids) else len(start),
+                             _NO_IDS if prior is None else _writable(prior, np.int64),
+                             np.full(len(start), -1, np.int64) if by is None else by)
     return out, int(tests)
 
 
@@ -264,7 +271,7 @@ hull filter (they stray by an ulp or so: 1e-15 m at tree scale)."""
 
 @njit(cache=True)
 def _segments_kernel(v, f, cells, flo, fhi, ftop, lo, hi, skip, start, end, counts, stride, out,
-                     until_clear, ids, n_ids) -> int:  # pragma: no cover
+                     until_clear, ids, n_ids, prior, by) -> int:  # pragma: no cover
     tests = np.zeros(1, np.int64)
     near = np.zeros(lo.shape[0], np.int64)
     # each start's first-sample answer (0: not tried, 1: inside, 2: outside) and hull tests, by its id: a point's
@@ -273,12 +280,17 @@ def _segments_kernel(v, f, cells, flo, fhi, ftop, lo, hi, skip, start, end, coun
     # in a row, straight_from the same 64 vertices for up to 32 centres (session 24)
     known = np.zeros(n_ids, np.int8)
     known_tests = np.zeros(n_ids, np.int64)
+    known_by = np.full(n_ids, -1, np.int64)
     scratch = np.zeros(1, np.int64)
     run = 0
     for s in range(start.shape[0]):
         if until_clear and s > 0 and not out[s - 1]:
             out[s:] = True
             break
+        if prior.shape[0] and prior[s] >= 0:  # a hull known to hold one of its samples (see segments_blocked)
+            out[s] = True
+            by[s] = prior[s]
+            continue
         if s > 0 and not (start[s, 0] == start[s - 1, 0] and start[s, 1] == start[s - 1, 1]
                           and start[s, 2] == start[s - 1, 2]):
             run += 1  # no ids given: a run of equal starts shares one
@@ -289,6 +301,7 @@ def _segments_kernel(v, f, cells, flo, fhi, ftop, lo, hi, skip, start, end, coun
         if cached and known[g] == 1:  # blocked at its start: sample 0 is tried first, whatever the near hulls
             tests[0] += known_tests[g]
             out[s] = True
+            by[s] = known_by[g]
             continue
         n_near = _hulls_near(lo, hi, skip, start[s], end[s], near)
         if n_near == 0:
@@ -303,15 +316,16 @@ def _segments_kernel(v, f, cells, flo, fhi, ftop, lo, hi, skip, start, end, coun
                 y = start[s, 1] + t * (end[s, 1] - start[s, 1])
                 z = start[s, 2] + t * (end[s, 2] - start[s, 2])
                 if i > 0 or not cached:
-                    out[s] = _sample_inside(v, f, cells, flo, fhi, ftop, lo, hi, near, n_near, x, y, z, tests)
+                    by[s] = _sample_hull(v, f, cells, flo, fhi, ftop, lo, hi, near, n_near, x, y, z, tests)
                 else:
                     if known[g] == 0:
                         scratch[0] = 0
-                        inside = _sample_inside(v, f, cells, flo, fhi, ftop, lo, hi, near, n_near, x, y, z, scratch)
-                        known[g] = 1 if inside else 2
+                        known_by[g] = _sample_hull(v, f, cells, flo, fhi, ftop, lo, hi, near, n_near, x, y, z, scratch)
+                        known[g] = 1 if known_by[g] >= 0 else 2
                         known_tests[g] = scratch[0]
                     tests[0] += known_tests[g]
-                    out[s] = known[g] == 1
+                    by[s] = known_by[g]
+                out[s] = by[s] >= 0
                 if out[s]:
                     break
             if out[s]:
@@ -320,17 +334,17 @@ def _segments_kernel(v, f, cells, flo, fhi, ftop, lo, hi, skip, start, end, coun
 
 
 @njit(cache=True)
-def _sample_inside(v, f, cells, flo, fhi, ftop, lo, hi, near, n_near, x, y, z, tests) -> bool:  # pragma: no cover
-    """True if (x, y, z) lies inside one of the ``near`` hulls whose box strictly holds it, tried in ascending
-    order (``tests[0]`` counting each)."""
+def _sample_hull(v, f, cells, flo, fhi, ftop, lo, hi, near, n_near, x, y, z, tests) -> int:  # pragma: no cover
+    """The first of the ``near`` hulls whose box strictly holds (x, y, z) and which holds it, tried in ascending
+    order (``tests[0]`` counting each); -1 for none."""
     for n in range(n_near):  # ascending, as _point_inside tries them
         k = near[n]
         if not (lo[k, 0] < x < hi[k, 0] and lo[k, 1] < y < hi[k, 1] and lo[k, 2] < z < hi[k, 2]):
             continue
         tests[0] += 1
         if _hull_holds(v, f, cells, flo, fhi, ftop, k, x, y, z):
-            return True
-    return False
+            return k
+    return -1
 
 
 @njit(cache=True)
@@ -364,10 +378,11 @@ def warm() -> None:
     q = np.full((1, 3), 0.1)
     inside_any(pack, lo, hi, -1, q)
     segments_blocked(pack, lo, hi, -1, q, q + 0.1, np.array([3]), until_clear=True)
+    segments_blocked(pack, lo, hi, -1, q, q + 0.1, np.array([3]), prior=np.array([-1]), by=np.full(1, -1))
     args = (pack.vertices, pack.faces, _cells(pack), pack.face_lo, pack.face_hi, pack.face_top)
     tests, near = np.zeros(1, np.int64), np.zeros(1, np.int64)
     _cell(pack.grid, 0, 0.1, 0)
     _hull_holds(*args, 0, 0.1, 0.1, 0.1)
     _point_inside(*args, lo, hi, -1, 0.1, 0.1, 0.1, tests)
     _hulls_near(lo, hi, -1, q[0], q[0] + 0.1, near)
-    _sample_inside(*args, lo, hi, near, 1, 0.1, 0.1, 0.1, tests)
+    _sample_hull(*args, lo, hi, near, 1, 0.1, 0.1, 0.1, tests)

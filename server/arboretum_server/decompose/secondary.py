@@ -32,6 +32,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.spatial import cKDTree
 
+from .blockers import forget_blockers
 from .carve import part_overlaps, remember_plain, unwrap
 from .clear import bent_fallback, boxes, foreign, inside_foreign, straight_fallback
 from .graph import path_after_cut, path_to, query, shortest_paths, weighted
@@ -149,6 +150,7 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
     which ``tunnel.behind`` gave a way carved through the other new lobes or a moved centre (a branch
     stays crossing only when neither clears it).
     """
+    forget_blockers()  # the repairs' known blockers (blockers.Blockers) live for one call
     lobes = list(others) + _hulled(groups, centres, pts, hulls, o.alpha_radius)
     part_overlaps(lobes, len(others), mains, pts, o.alpha_radius)
     centres = [lb.centre for lb in lobes[len(others):]]
@@ -172,7 +174,9 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
             continue
         rerouted += 1
         box = _reroute(lobes, j, targets[j - len(others)], route, box)
-    return lobes, pred, rerouted, behind(lobes, len(others), pts, mains, o)
+    asked = behind(lobes, len(others), pts, mains, o)
+    forget_blockers()
+    return lobes, pred, rerouted, asked
 
 
 _TREES = ArrayMemo()

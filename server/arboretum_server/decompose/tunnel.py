@@ -21,6 +21,7 @@ from .clear import (
     first_clear,
     foreign,
     inside_foreign,
+    kept_boxes,
     straight_from,
     straight_routes,
 )
@@ -93,12 +94,12 @@ def _routes(lobes: list[LobeState], n_kept: int, j: int, pts: np.ndarray, mains:
     """Routes for new lobe ``j`` clear of the kept lobes, in the order ``behind`` carves them: the straight
     ones through the fewest other new lobes (the nearest first among equals; before session 17, the nearest
     alone), then the bent one when no straight route is clear."""
-    sub = [*lobes[:n_kept], lobes[j]]
-    straight = straight_routes(sub, n_kept, mains)
+    kept = kept_boxes(lobes, n_kept)  # the kept lobes alone (session 25: not a list of them packed again per lobe)
+    straight = straight_routes(lobes, j, mains, box=kept)
     others = [k for k in range(n_kept, len(lobes)) if k != j]
     in_way = lobes_entered(lobes, others, [sample_polylines([r[0]], step) for r in straight])
     yield from [straight[i] for i in np.argsort(in_way, kind="stable")[:ROUTES_TRIED]]
-    if not straight and (bent := bent_fallback(sub, n_kept, mains, pts)) is not None:
+    if not straight and (bent := bent_fallback(lobes, j, mains, pts, box=kept)) is not None:
         yield bent
 
 
@@ -135,10 +136,11 @@ def moved_centre(lobes: list[LobeState], j: int, pts: np.ndarray, mains: BranchS
     clusters either side of the trunk has its mean near the trunk, among the lobes round it
     (``part_overlaps`` moves a centre the same way when it lies inside another lobe)."""
     own = pts[lobes[j].members]
-    own = own[np.argsort(np.linalg.norm(own - lobes[j].centre, axis=1), kind="stable")]
-    own = own[:: max(1, len(own) // tries)]
-    own = own[~inside_foreign(lobes, j, own)]
-    found = straight_from(lobes, j, own, mains)  # the first of them that a straight branch reaches
+    at = np.argsort(np.linalg.norm(own - lobes[j].centre, axis=1), kind="stable")
+    at = at[:: max(1, len(own) // tries)]
+    at = at[~inside_foreign(lobes, j, own[at])]
+    own = own[at]
+    found = straight_from(lobes, j, own, mains, own=(at, pts))  # the first of them a straight branch reaches
     if found is not None:
         route = found[1]
         lobes[j] = replace(lobes[j], centre=own[found[0]], segment=route[0], parent=route[1], parent_vertex=route[2])
@@ -187,9 +189,8 @@ def along(lobes: list[LobeState], n_kept: int, j: int, branch: tuple[np.ndarray,
     if bent is not None:
         lobes[j] = replace(lobes[j], segment=bent[0], centre=bent[1], parent=branch[1], parent_vertex=branch[2])
         return True
-    lo, hi = (b.copy() for b in box)
-    lo[n_kept:], hi[n_kept:] = np.inf, -np.inf  # the kept lobes alone
-    clear = [seg for seg in routes if not foreign(lobes, j, seg, tol, (lo, hi))]
+    kept = kept_boxes(lobes, n_kept)  # the kept lobes alone
+    clear = [seg for seg in routes if not foreign(lobes, j, seg, tol, kept)]
     in_way = lobes_entered(lobes, [k for k in range(n_kept, len(lobes)) if k != j],
                            [sample_polylines([s], step) for s in clear]) if clear else np.zeros(0, int)
     if any(carve_route(lobes, n_kept, j, (clear[i], branch[1], branch[2]), pts, o, step)
