@@ -10,7 +10,8 @@ lobe: the outer part of a lobe, inserted or split off) is routed round the kept 
 lobes in its way are carved out of it (``tunnel.behind``, the last step of ``make_lobes``); failing that,
 its centre moves to one of its own points that a straight branch reaches clear (``tunnel.moved_centre``).
 A piece of a split lobe still crossing after all that runs its branch along the split lobe's own, which
-stayed clear, and turns off it to the piece (``tunnel.along``).
+stayed clear, and turns off it to the piece (``tunnel.along``); since session 25 a piece tries that as soon
+as its rerouted branch and the straight repair cross, before the bent and carved repairs.
 Lobes keep their order; new ones come last (a lobe an insert leaves under 4 points is dropped). Point indices
 refer to ``Decomposition.points``; strokes are in the HBL's output frame.
 """
@@ -92,7 +93,8 @@ def _strokes(strokes) -> list[np.ndarray]:
 
 
 def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], centres: np.ndarray,
-            t0: float, op: str, order: list[int] | None = None, hbl: bool = True) -> Decomposition:
+            t0: float, op: str, order: list[int] | None = None, hbl: bool = True,
+            split: tuple[np.ndarray, int, int] | None = None) -> Decomposition:
     """Route the new lobes over ``groups`` after ``kept`` and rebuild the records.
 
     A new lobe's branch still crossing another new lobe carves its way through it (``tunnel.behind`` in
@@ -101,6 +103,8 @@ def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], c
     ``order`` (one slot per kept lobe and group, in that order) gives each lobe's place in the result.
     ``hbl``: False leaves ``d``'s HBL in place, for a caller that changes the lobes again and builds it once
     (``split_lobe``: ``build_hbl`` is a pure function of the state, so the same HBL either way).
+    ``split``: the split lobe's branch (segment, parent, vertex), which the groups' branches may run along in
+    the first round (``make_lobes``; the later rounds route kept lobes).
     """
     kept, groups, centres = list(kept), list(groups), list(centres)
     slots = list(order) if order is not None else list(range(len(kept) + len(groups)))
@@ -114,7 +118,8 @@ def _finish(d: Decomposition, kept: list[LobeState], groups: list[np.ndarray], c
             sources = zone_sources(d.points, np.concatenate([lb.members for lb in kept] + groups))
         zone = zones(d.points, [lb.members for lb in kept] + groups, sources)
         lobes = make_lobes(groups, np.array(centres), d.points, d.adjacency, d.root_index, zone, d.mains,
-                           d.grid, d.tau, d.options, tuple(kept), (None,) * (len(groups) - len(hulls)) + hulls)[0]
+                           d.grid, d.tau, d.options, tuple(kept), (None,) * (len(groups) - len(hulls)) + hulls,
+                           split=split if rnd == 0 else None)[0]
         cross = sorted(_crossing_new(lobes, len(kept), d.options.step / 2)) if rnd + 1 < ROUTE_ROUNDS else []
         if cross:  # the new lobes give way to the branches already there, if carving lets them
             _give_way(lobes, len(kept), cross, d.points, d.options.alpha_radius)
@@ -315,7 +320,9 @@ def split_lobe(d: Decomposition, j: int, strokes: list[np.ndarray], seed: int = 
                          f"lobe needs at least {MIN_LOBE_POINTS}: draw it over more of the lobe")
     centres = np.array([d.points[g].mean(axis=0) for g in groups])
     kept = [x for k, x in enumerate(d.lobes) if k != j]
-    return _along_split(_finish(d, kept, groups, centres, t0, "split_lobe", hbl=False), lb, len(kept), t0)
+    branch = (lb.segment, lb.parent, lb.parent_vertex) if lb.parent >= 0 and len(lb.segment) >= 2 else None
+    out = _finish(d, kept, groups, centres, t0, "split_lobe", hbl=False, split=branch)
+    return _along_split(out, lb, len(kept), t0)
 
 
 def _along_split(d: Decomposition, split: LobeState, n_kept: int, t0: float) -> Decomposition:
