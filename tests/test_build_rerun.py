@@ -129,11 +129,12 @@ def test_rebuild_replaces_examples_with_this_runs_options(built, tmp_path, capsy
     assert not set(new) & set(old)  # fresh ids: a session naming an old id never shows a new example
 
 
-def test_edited_scan_notes_the_stale_examples(tmp_path):
-    scan = synthetic_scans(tmp_path / "scans", 1, points=POINTS)[0]
-    lib = tmp_path / "lib"
-    first = build_library([str(scan)], lib, OPTS)
-    old = first.records[0].examples
+def test_edited_scan_notes_the_stale_examples(built, tmp_path):
+    # the module's library, copied, with a copy of its first scan (it built its own library of that scan)
+    lib = _copy(built[0], tmp_path)
+    scan = Path(shutil.copy(built[1][0], tmp_path / built[1][0].name))
+    old = _ids(lib, file_sha256(scan))
+    assert old
     write_points(scan, read_points(scan).points[::2])  # the user thins the scan in place
     again = build_library([str(scan)], lib, OPTS)
     rec = again.records[0]

@@ -6,6 +6,8 @@ scene units); the trunk's top a third of the way up the crown; a sparsely filled
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 
 import numpy as np
@@ -56,17 +58,39 @@ def _scaled_hbl(h: HBL, k: float) -> HBL:
     return replace(h, root=h.root * k, branches=branches, lobes=lobes, points=h.points * k)
 
 
+def _quiet_modules(argv: list[str]) -> dict:
+    """``_modules`` for a module-scoped fixture (no capsys there): the JSON summary ``modules`` prints."""
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(["modules", *argv, "--json"]) == 0
+    return json.loads(out.getvalue())
+
+
+def _sphere_run(folder, centre: list[float], r: float) -> dict:
+    """``modules --crown`` on a sphere of radius r (seed 1): its summary, the trunk's (top, base) and the
+    crown's (lo, hi) heights as written to the OBJ."""
+    v, f = sphere_mesh(centre, r)
+    name = f"c{r}_{'_'.join(f'{c:g}' for c in centre)}"
+    save_obj(folder / f"{name}.obj", v, f)
+    lo, hi = np.round(v[:, 2], 5).min(), np.round(v[:, 2], 5).max()  # as written to the OBJ
+    s = _quiet_modules(["--crown", str(folder / f"{name}.obj"), "--out", str(folder / f"{name}.glb"), "--seed", "1"])
+    return {"summary": s, "trunk": _trunk_top(folder / f"{name}.glb"), "z": (lo, hi), "v": v}
+
+
+@pytest.fixture(scope="module")
+def sphere_3m(tmp_path_factory) -> dict:
+    """The reference run of the any-size test, made once for both sizes (it was made once per size)."""
+    return _sphere_run(tmp_path_factory.mktemp("sphere3"), [0, 0, 6.0], 3.0)
+
+
 @pytest.mark.parametrize("radius", [0.1, 100.0])
-def test_a_sphere_crown_gives_the_same_tree_at_any_size(tmp_path, capsys, radius):
+def test_a_sphere_crown_gives_the_same_tree_at_any_size(tmp_path, sphere_3m, radius):
     """Sphere of radius 3 m at z = 6 m (reference) against the same shape at r = 0.1 m and r = 100 m."""
     s = {}
     for r in (3.0, radius):
-        v, f = sphere_mesh([0, 0, 2 * r], r)
-        save_obj(tmp_path / f"c{r}.obj", v, f)
-        lo, hi = np.round(v[:, 2], 5).min(), np.round(v[:, 2], 5).max()  # as written to the OBJ
-        s[r] = _modules(["--crown", str(tmp_path / f"c{r}.obj"), "--out", str(tmp_path / f"t{r}.glb"),
-                         "--seed", "1"], capsys)
-        top, base = _trunk_top(tmp_path / f"t{r}.glb")
+        run = sphere_3m if r == 3.0 else _sphere_run(tmp_path, [0, 0, 2 * r], r)
+        (lo, hi), (top, base) = run["z"], run["trunk"]
+        s[r] = run["summary"]
         assert base == pytest.approx(lo - (hi - lo) / 4, abs=1e-6 * r)  # a quarter of the crown below it
         assert top == pytest.approx(lo + (hi - lo) / 3, rel=1e-4)  # a third of the way up the crown
     ref, other = s[3.0], s[radius]
@@ -87,15 +111,24 @@ def coffee(tmp_path_factory):
     return d
 
 
-def test_a_decomposed_tree_gives_the_same_modular_tree_at_any_size(tmp_path, coffee, capsys):
+@pytest.fixture(scope="module")
+def coffee_modules(coffee) -> dict[str, tuple[dict, tuple[float, float]]]:
+    """``modules --assembly`` (seed 2) on the coffee tree at each size: size -> (summary, trunk (top, base)).
+    Made once: the 0.8 m run was made twice, here and by the poorly-filled test, with the same arguments."""
     runs = {}
     for size in ("0.8", "8", "0.08"):
-        out = tmp_path / f"m{size}.glb"
-        runs[size] = _modules(["--assembly", str(coffee / f"c{size}.npz"), "--out", str(out), "--seed", "2"],
-                              capsys)
+        out = coffee / f"m{size}.glb"
+        runs[size] = (_quiet_modules(["--assembly", str(coffee / f"c{size}.npz"), "--out", str(out), "--seed", "2"]),
+                      _trunk_top(out))
+    return runs
+
+
+def test_a_decomposed_tree_gives_the_same_modular_tree_at_any_size(coffee, coffee_modules):
+    runs = {}
+    for size in ("0.8", "8", "0.08"):
+        runs[size], (top, base) = coffee_modules[size]
         h = load_record(coffee / f"c{size}.npz", HBL)
         z = np.concatenate([lb.hull_vertices[:, 2] for lb in h.lobes])
-        top, base = _trunk_top(out)
         assert base == pytest.approx(h.branches[0].points[0][2], abs=1e-5 * float(size))
         assert top == pytest.approx(z.min() + (z.max() - z.min()) / 3, rel=1e-3)
     counts = [r["modules_placed"] for r in runs.values()]
@@ -104,10 +137,10 @@ def test_a_decomposed_tree_gives_the_same_modular_tree_at_any_size(tmp_path, cof
     assert max(reached) - min(reached) < 0.1
 
 
-def test_a_poorly_filled_crown_says_so(tmp_path, coffee, capsys):
+def test_a_poorly_filled_crown_says_so(tmp_path, coffee, coffee_modules, capsys):
     """The coffee tree's 40 small, separate lobe hulls are filled sparsely: a note, not a success line."""
     out = tmp_path / "m.glb"
-    s = _modules(["--assembly", str(coffee / "c0.8.npz"), "--out", str(out), "--seed", "2"], capsys)
+    s = coffee_modules["0.8"][0]  # the --json run of these arguments
     reached = s["constraints"]["reached_fraction"]
     assert reached < 0.5 and len(s["notes"]) == 1 and f"only {100 * reached:.0f}%" in s["notes"][0]
     assert main(["modules", "--assembly", str(coffee / "c0.8.npz"), "--out", str(out), "--seed", "2"]) == 0
@@ -138,22 +171,25 @@ def test_the_fitted_trunk_does_not_reach_a_small_crown_alone():
     assert tree.stats.reached_fraction < 0.2
 
 
+@pytest.fixture(scope="module")
+def sphere_4m_near(tmp_path_factory) -> dict:
+    """The near-the-ground run of the high-crown test, made once for both positions (it was made once per
+    position)."""
+    return _sphere_run(tmp_path_factory.mktemp("sphere4"), [0.0, 0.0, 6.0], 4.0)
+
+
 @pytest.mark.parametrize("xyz", [(0.0, 0.0, 310.0), (512345.0, 4123456.0, 316.0)])
-def test_a_crown_high_above_z0_gets_the_tree_it_gets_near_the_ground(tmp_path, capsys, xyz):
+def test_a_crown_high_above_z0_gets_the_tree_it_gets_near_the_ground(tmp_path, sphere_4m_near, xyz):
     """An r = 4 m sphere at z = 6 m (trunk on z = 0) against the same sphere 310 m up or at UTM xy: before,
     the trunk stood on z = 0, ×88 (313 m), and d_k covered the crown from the trunk alone (1 module, "100 %")."""
     from arboretum_server.modules.fit import crown_root
 
     runs = {}
     for c in ((0.0, 0.0, 6.0), xyz):
-        v, f = sphere_mesh(list(c), 4.0)
-        save_obj(tmp_path / "c.obj", v, f)
-        runs[c] = _modules(["--crown", str(tmp_path / "c.obj"), "--out", str(tmp_path / "t.glb"), "--seed", "1"],
-                           capsys)
-        top, base = _trunk_top(tmp_path / "t.glb")
-        lo, hi = np.round(v[:, 2], 5).min(), np.round(v[:, 2], 5).max()
+        run = sphere_4m_near if c == (0.0, 0.0, 6.0) else _sphere_run(tmp_path, list(c), 4.0)
+        runs[c], (top, base), (lo, hi) = run["summary"], run["trunk"], run["z"]
         assert base == pytest.approx(max(0.0, lo - (hi - lo) / 4), abs=1e-3)
-        assert base == pytest.approx(crown_root(v)[2], abs=1e-3)
+        assert base == pytest.approx(crown_root(run["v"])[2], abs=1e-3)
         assert top == pytest.approx(lo + (hi - lo) / 3, abs=1e-3)
     near, far = runs[(0.0, 0.0, 6.0)], runs[xyz]
     assert near["modules_placed"] > 100 and near["constraints"]["reached_fraction"] > 0.85
