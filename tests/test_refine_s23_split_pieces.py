@@ -13,15 +13,9 @@ import pytest
 
 @pytest.fixture(scope="module")
 def leaf_on_pine():
-    from arboretum_server.decompose.options import DecomposeOptions
-    from arboretum_server.decompose.pipeline import decompose
-    from arboretum_server.decompose.report import CASES, grow_truth
-    from arboretum_server.decompose.toytree import toy_scan
+    from split_helpers import leaf_on_pine
 
-    truth = grow_truth("harmonic", "pine", 1)
-    pts, _ = toy_scan(truth, n=40000, noise=0.002 * float(np.ptp(truth.positions[:, 2])), seed=1,
-                      **CASES["leaf-on"])
-    return decompose(pts, DecomposeOptions(species="pine"))
+    return leaf_on_pine()
 
 
 def _strokes(d, j: int, k: int) -> list[np.ndarray]:

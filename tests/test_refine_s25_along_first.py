@@ -16,34 +16,15 @@ import pytest
 
 @pytest.fixture(scope="module")
 def leaf_on_pine():
-    from arboretum_server.decompose.options import DecomposeOptions
-    from arboretum_server.decompose.pipeline import decompose
-    from arboretum_server.decompose.report import CASES, grow_truth
-    from arboretum_server.decompose.toytree import toy_scan
+    from split_helpers import leaf_on_pine
 
-    truth = grow_truth("harmonic", "pine", 1)
-    pts, _ = toy_scan(truth, n=40000, noise=0.002 * float(np.ptp(truth.positions[:, 2])), seed=1,
-                      **CASES["leaf-on"])
-    return decompose(pts, DecomposeOptions(species="pine"))
+    return leaf_on_pine()
 
 
 def _strokes(d, j: int, k: int) -> list[np.ndarray]:
-    """``k`` one-point strokes (output frame) as the bench's ``_twenty_strokes`` draws them: the lobe's points
-    nearest a k-means++ clustering of it (seeds 100-103), the first set that gives every piece 4 points."""
-    from scipy.cluster.vq import kmeans2
-    from scipy.spatial import cKDTree
+    from split_helpers import bench_strokes
 
-    from arboretum_server.decompose.refine import MIN_LOBE_POINTS, from_output, stroke_parts
-
-    m = d.lobes[j].members
-    for seed in range(100, 104):
-        pick = m[cKDTree(d.points[m]).query(kmeans2(d.points[m], k, seed=seed, minit="++")[0])[1]]
-        strokes = [d.to_output(d.points[p])[None] for p in pick]
-        if len(set(pick.tolist())) == k:
-            owner = stroke_parts(d.points[m], [from_output(d, s) for s in strokes], j, 1.0)
-            if np.bincount(owner, minlength=k).min() >= MIN_LOBE_POINTS:
-                return strokes
-    raise AssertionError(f"no stroke set splits lobe {j} in {k}")
+    return bench_strokes(d, j, k)
 
 
 def _pieces(d, lobe: int):
