@@ -26,19 +26,11 @@ def _quarter(pts: np.ndarray) -> np.ndarray:
 
 
 def _on_stairs_by_a_wall(pts: np.ndarray, n: int = 40_000) -> np.ndarray:
-    """``pts`` (Z up, no ground) on a ground disc 1.5 heights round its foot with a flight of 8 steps of
-    5 % of the height, treads 6 % deep, from 0.1 heights along +X, and a wall of 8,000 points 3 heights
-    long along X, 0.4 tall, 0.5 heights from the foot, 0.3 % thick (tests/test_pointio_s24_stairs.py)."""
-    rng = np.random.default_rng(0)
-    h, foot = float(np.ptp(pts[:, 2])), pts[np.argmin(pts[:, 2])]
-    r, a = 1.5 * h * np.sqrt(rng.uniform(0, 1, n)), rng.uniform(0, 2 * np.pi, n)
-    x, y = r * np.cos(a), r * np.sin(a)
-    steps = np.where(x > 0.1 * h, np.minimum(np.floor((x - 0.1 * h) / (0.06 * h)) + 1, 8), 0)
-    ground = np.stack([x, y, 0.05 * h * steps + rng.normal(0, 0.002 * h, n)], axis=1)
-    m = 8000
-    wall = np.stack([rng.uniform(-1.5 * h, 1.5 * h, m), 0.5 * h + rng.normal(0, 0.003 * h, m),
-                     rng.uniform(0, 0.4 * h, m)], axis=1)
-    return np.concatenate([pts, ground + foot, wall + foot])
+    """``pts`` (Z up, no ground) on tests/test_pointio_s24_stairs.py's flight of 8 steps along +X with its wall
+    3 heights long along X (facing Y)."""
+    from test_pointio_s24_stairs import _on_stairs_by_a_wall as stairs
+
+    return stairs(pts, "y", n)
 
 
 def _on_terraces(pts: np.ndarray, step: float = 0.06, n: int = 40_000) -> np.ndarray:
