@@ -326,8 +326,9 @@ def bent_fallback(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndar
     ww = np.tile(w, (len(order), 1))
     at = np.tile(at, len(order))  # each pair's waypoint among ``every``, which are members 0, spacing, ...
     named = (np.arange(0, len(members), spacing), pts)
-    first = first_clear(lobes, j, verts[v], ww, step, box, v, pairs=Pairs(verts, v, every, at, *named))  # its batch:
-    if first < 0:  # the first with a clear pair
+    # the batch of the first clear pair is the first batch with one
+    first = first_clear(lobes, j, verts[v], ww, step, box, v, pairs=Pairs(verts, v, every, at, *named))
+    if first < 0:
         return None
     size = batch * len(w)
     v, ww, at = (x[first // size * size:][:size] for x in (v, ww, at))

@@ -237,19 +237,29 @@ def _along_free(lobes: list[LobeState], j: int, seg: np.ndarray, tol: float, box
     if not len(w) or not ok:
         return None
     v, b = np.repeat(np.arange(ok), len(w)), np.tile(w, (ok, 1))
-    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(seg, axis=0), axis=1))])[v]
+    arc = _arc_lengths(seg)[v]
     order = np.argsort(arc + np.linalg.norm(b - seg[v], axis=1) + np.linalg.norm(b - centre, axis=1), kind="stable")
     for _ in range(ROUTES_TRIED):
         k = first_clear(lobes, j, seg[v[order]], b[order], step, box, v[order])
         if k < 0:
             return None
         i = order[k]
-        route = np.vstack([seg[: v[i]], resample_step(np.stack([seg[v[i]], b[i]]), 0.01),
-                           resample_step(np.stack([b[i], centre]), 0.01)[1:]])
+        route = _via(seg, v[i], b[i], centre)
         if not foreign(lobes, j, route, tol, box):
             return route
         order = order[k + 1:]
     return None
+
+
+def _arc_lengths(seg: np.ndarray) -> np.ndarray:
+    """(n,) arc length along ``seg`` (n, 3) at each of its vertices."""
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(seg, axis=0), axis=1))])
+
+
+def _via(seg: np.ndarray, v: int, waypoint: np.ndarray, end: np.ndarray | None) -> np.ndarray:
+    """``seg`` up to its vertex ``v``, then straight to ``waypoint`` and, when given, on to ``end`` (every 1 cm)."""
+    route = np.vstack([seg[:v], resample_step(np.stack([seg[v], waypoint]), 0.01)])
+    return route if end is None else np.vstack([route, resample_step(np.stack([waypoint, end]), 0.01)[1:]])
 
 
 def _clear_prefix(lobes: list[LobeState], j: int, seg: np.ndarray, tol: float, box) -> int:
@@ -277,7 +287,7 @@ def _along_bent(lobes: list[LobeState], j: int, seg: np.ndarray, pts: np.ndarray
     v = np.repeat(np.arange(ok), len(w))
     a, b = seg[v], np.tile(w, (ok, 1))
     first = ~blocked(lobes, j, a, b, step, box)
-    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(seg, axis=0), axis=1))])[v]
+    arc = _arc_lengths(seg)[v]
     length = np.where(first, arc + np.linalg.norm(b - a, axis=1), np.inf)
     last = np.tile(~blocked(lobes, j, w, np.broadcast_to(centre, w.shape), step, box), ok)
     leg = np.tile(np.linalg.norm(w - centre, axis=1), ok)
@@ -285,9 +295,7 @@ def _along_bent(lobes: list[LobeState], j: int, seg: np.ndarray, pts: np.ndarray
         k = int(np.argmin(total))
         if not np.isfinite(total[k]):
             continue
-        route = np.vstack([seg[: v[k]], resample_step(np.stack([a[k], b[k]]), 0.01)])
-        if bend:
-            route = np.vstack([route, resample_step(np.stack([b[k], centre]), 0.01)[1:]])
+        route = _via(seg, v[k], b[k], centre if bend else None)
         if not foreign(lobes, j, route, tol, box):
             return route, centre if bend else b[k]
     return None
