@@ -60,8 +60,9 @@ def _edge_graph(vertices: np.ndarray, faces: np.ndarray) -> coo_matrix:
     raise InputError("module mesh: could not connect its parts")
 
 
-def _isoline_islands(vertices, faces, g, level):
-    """Islands of the isoline g == level: list of (points (K, 3), segment lengths (K,), segment mids)."""
+def _isoline_segments(vertices, faces, g, level):
+    """The isoline g == level face by face: segment ends (S, 2, 3) and the mesh-edge keys of the ends
+    (S, 2) int64 (two segments sharing a key meet there)."""
     gf = g[faces]
     hit = (gf.min(axis=1) < level) & (gf.max(axis=1) > level)
     f = faces[hit]
@@ -81,20 +82,35 @@ def _isoline_islands(vertices, faces, g, level):
     pts = np.stack([p[ok] for _, p, _ in ends], axis=1)
     keys = np.stack([k[ok] for _, _, k in ends], axis=1)
     rows = np.arange(len(order))[:, None]
-    seg_p, seg_k = pts[rows, order], keys[rows, order]
-    uniq, inv = np.unique(seg_k.ravel(), return_inverse=True)
-    inv = inv.reshape(-1, 2)
-    m = len(uniq)
-    graph = coo_matrix((np.ones(len(inv)), (inv[:, 0], inv[:, 1])), shape=(m, m))
+    return pts[rows, order], keys[rows, order]
+
+
+def _isoline_islands(vertices, faces, g, levels):
+    """For each of ``levels``, the islands of the isoline g == level: a list of (segment lengths (K,),
+    segment mids (K, 3)) per level, islands of at least 3 segments in the order of their first end.
+
+    The disjoint set of every level's segments is one graph (nodes offset level by level), so the
+    connected components are found once, not once per level (the sparse set-up cost ~1 ms a call)."""
+    segs = [_isoline_segments(vertices, faces, g, level) for level in levels]
+    invs, offset = [], 0
+    for _, seg_k in segs:
+        uniq, inv = np.unique(seg_k.ravel(), return_inverse=True)
+        invs.append(inv.reshape(-1, 2) + offset)
+        offset += len(uniq)
+    both = np.concatenate(invs) if invs else np.zeros((0, 2), np.int64)
+    graph = coo_matrix((np.ones(len(both)), (both[:, 0], both[:, 1])), shape=(offset, offset))
     _, lab = connected_components(graph, directed=False)  # the disjoint set of isoline segments
-    seg_lab = lab[inv[:, 0]]
-    lengths = np.linalg.norm(seg_p[:, 1] - seg_p[:, 0], axis=1)
-    mids = seg_p.mean(axis=1)
     out = []
-    for island in np.unique(seg_lab):
-        sel = seg_lab == island
-        if sel.sum() >= 3 and lengths[sel].sum() > 0:
-            out.append((lengths[sel], mids[sel]))
+    for (seg_p, _), inv in zip(segs, invs):
+        seg_lab = lab[inv[:, 0]]
+        lengths = np.linalg.norm(seg_p[:, 1] - seg_p[:, 0], axis=1)
+        mids = seg_p.mean(axis=1)
+        islands = []
+        for island in np.unique(seg_lab):
+            sel = seg_lab == island
+            if sel.sum() >= 3 and lengths[sel].sum() > 0:
+                islands.append((lengths[sel], mids[sel]))
+        out.append(islands)
     return out
 
 
@@ -104,8 +120,7 @@ def _link_levels(vertices, faces, g, levels):
     splines: list[list] = [[(base_pts.mean(axis=0), None)]]
     parents, alive = [-1], [0]
     link = 0.0
-    for level in levels:
-        islands = _isoline_islands(vertices, faces, g, level)
+    for islands in _isoline_islands(vertices, faces, g, levels):
         if not islands or not alive:
             break
         cents = np.array([(m * w[:, None]).sum(0) / w.sum() for w, m in islands])
