@@ -175,6 +175,10 @@ def make_lobes(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, a
         if seg is not None:
             lobes[j] = replace(lobes[j], segment=seg)
             continue
+        if not rerouted:  # the first reroute: route with it every later lobe that would be routed again now
+            later = [k for k in range(j + 1, len(lobes))
+                     if _crosses(lobes, k, raw[k - len(others)], lobes[k].segment, o.step / 2, box)]
+            _batch_routes(lobes, route, [j, *later], [targets[k - len(others)] for k in (j, *later)])
         rerouted += 1
         box = _reroute(lobes, j, targets[j - len(others)], route, box)
     asked = behind(lobes, len(others), pts, mains, o)
@@ -227,7 +231,8 @@ class _Route(NamedTuple):
     tree: cKDTree
     cache: dict
     """The per-edge zone weights of ``foreign_graph``, built at the first reroute of a ``make_lobes`` call, and
-    the distances on the graph where every zone is foreign (``_reroute_path``)."""
+    the distances on the graph where every zone is foreign (``_reroute_path``), and the routes of the lobes
+    routed again in one batch at the first reroute (``_batch_routes``), by lobe, until their ``_reroute``."""
     pred: np.ndarray
     """(N,) the shared routing's predecessors."""
     split: tuple[np.ndarray, int, int] | None = None
@@ -253,7 +258,7 @@ def foreign_graph(r: _Route, j: int) -> csr_matrix:
     """``weighted(adjacency, cost)`` for lobe ``j``'s reroute (zone ``j`` edges ``ZONE_COST`` longer, other
     zones' ``FOREIGN_COST``), the same weights bit for bit, from the edge zones built once per call (an edge
     takes its dearer end's cost, as in ``weighted``: this relies on 1 <= ``ZONE_COST`` <= ``FOREIGN_COST``)."""
-    if not r.cache:
+    if "edges" not in r.cache:
         r.cache["edges"] = _edge_zones(r.adjacency, r.zone)
     adj, dear, owner = r.cache["edges"]
     w = dear.copy()
@@ -276,6 +281,36 @@ def _reroute_path(r: _Route, j: int, graph: csr_matrix, target: int) -> np.ndarr
     return path_after_cut(graph, r.cache["rows"], r.cache["base"], np.flatnonzero(owner == j), r.root, target)
 
 
+def _crosses(lobes: list[LobeState], j: int, raw: np.ndarray, smooth: np.ndarray, tol: float,
+             box: tuple[np.ndarray, np.ndarray]) -> bool:
+    """True if ``clear_smooth`` would give None (both ``smooth`` and ``raw`` enter a foreign lobe): lobe ``j`` is
+    routed again."""
+    return foreign(lobes, j, smooth, tol, box) and foreign(lobes, j, raw, tol, box)
+
+
+def _routes(r: _Route, centres: list[np.ndarray], js: list[int], targets: list[int]) -> list[tuple]:
+    """(target, centre, segment, smoothed segment, parent, vertex) of lobes ``js``' branches routed again round
+    the foreign lobes (``_reroute``'s route before its repairs), all at once: each path is centred, merged,
+    finished at its lobe's centre and smoothed by itself (every step works path by path, point by point), so
+    the same arrays as one call per lobe; one call of each for all of them (session 26: a split into 20
+    reroutes all 20 pieces, one ``merge_secondaries`` call each)."""
+    o = r.o
+    paths = _centred([r.pts[_reroute_path(r, j, foreign_graph(r, j), t)] for j, t in zip(js, targets)], r.grid,
+                     o.step)
+    merged = merge_secondaries(paths, r.mains, r.tau, o.resample, o.sc_bins, r.refs)
+    segs = [_finish(seg, c) for (seg, _, _), c in zip(merged, centres)]
+    smoothed = smooth_polylines(segs, vertex_limits(segs, r.tree))
+    return [(t, c, seg, sm, parent, pv) for t, c, seg, sm, (_, parent, pv) in zip(targets, centres, segs, smoothed,
+                                                                                  merged)]
+
+
+def _batch_routes(lobes: list[LobeState], r: _Route, js: list[int], targets: list[int]) -> None:
+    """``_routes`` of lobes ``js`` kept in ``r.cache["routes"]`` for their ``_reroute`` (which routes a lobe by
+    itself when its entry is missing or its target or centre changed since)."""
+    found = _routes(r, [lobes[j].centre for j in js], js, targets)
+    r.cache["routes"] = dict(zip(js, found))
+
+
 def _reroute(lobes: list[LobeState], j: int, target: int, r: _Route, box):
     """Lobe ``j``'s branch routed again round the foreign lobes (zones ``FOREIGN_COST`` dearer), and when it
     still enters one, the straight, bent and carved repairs in turn (``lobes[j]`` replaced in place; the
@@ -288,11 +323,10 @@ def _reroute(lobes: list[LobeState], j: int, target: int, r: _Route, box):
     bend 63.7 -> 37.0 degrees (mean), 67 worse and 247 better by rules set before; no crossing either way,
     leaf cover 1.0 in all 202 of the pine's splits; the bench's 8 splits at 0.57-0.88 of the CPU before."""
     lb, o = lobes[j], r.o
-    graph = foreign_graph(r, j)
-    path = _centred([r.pts[_reroute_path(r, j, graph, target)]], r.grid, o.step)
-    seg, parent, pv = merge_secondaries(path, r.mains, r.tau, o.resample, o.sc_bins, r.refs)[0]
-    seg = _finish(seg, lb.centre)
-    smoothed = smooth_polylines([seg], vertex_limits([seg], r.tree))[0]
+    found = r.cache.get("routes", {}).pop(j, None)
+    if found is None or found[0] != target or not np.array_equal(found[1], lb.centre):
+        found = _routes(r, [lb.centre], [j], [target])[0]
+    seg, smoothed, parent, pv = found[2:]
     seg = clear_smooth(lobes, j, seg, smoothed, o.step / 2, box, r.tree)
     if seg is None:
         fallback = straight_fallback(lobes, j, r.mains)
