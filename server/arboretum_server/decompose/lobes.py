@@ -210,8 +210,12 @@ def _pinched_edges(faces: np.ndarray) -> np.ndarray:
 
 def _has_edge(tets: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """(T,) bool: tetrahedra (T, 4) holding one of the ``edges`` (keys from ``_edge_keys``)."""
-    pairs = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
-    return np.any([np.isin(_edge_keys(tets[:, i], tets[:, j]), edges) for i, j in pairs], axis=0)
+    keys = _edge_keys(tets[:, _EDGE_A].ravel(), tets[:, _EDGE_B].ravel())  # (T * 6,): one np.isin, not six
+    return np.isin(keys, edges).reshape(-1, 6).any(axis=1)
+
+
+_EDGE_A, _EDGE_B = [0, 0, 0, 1, 1, 2], [1, 2, 3, 2, 3, 3]
+"""The six edges of a tetrahedron (T, 4) as pairs of its corner columns."""
 
 
 def _compact(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

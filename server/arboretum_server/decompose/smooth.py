@@ -16,6 +16,7 @@ import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
+from .memo import ArrayMemo
 from .merge import BranchSet, add_branch
 
 ITERATIONS = 12
@@ -33,14 +34,120 @@ INFLATE = 0.0
 """Taubin's mu: every second iteration steps by -``INFLATE`` (0: plain Laplacian smoothing)."""
 
 
+GRID_CELLS = 2_000_000
+"""Most cells of the dense grid ``spacing_grid`` lays over a cloud (16 MB of offsets); past that the
+k-d tree answers ``vertex_limits`` alone."""
+GRID_SIDE = 1.5
+"""``spacing_grid``'s cell side, in median 5th-neighbour distances of the cloud."""
+GRID_SHELLS = 3
+"""Rings of cells ``_spacing_kernel`` searches round a vertex before it leaves the vertex to the k-d tree."""
+_GRIDS = ArrayMemo()
+"""``spacing_grid`` per k-d tree, by its data array while that lives (a refinement queries the same
+cloud's tree some 20-60 times)."""
+
+
 def vertex_limits(segments: list[np.ndarray], tree: cKDTree | None) -> float | np.ndarray:
     """Displacement limits: ``LOCAL_SPACINGS`` local point spacings per vertex of ``segments`` (one array
     over all their vertices) when a k-d ``tree`` of the cloud is given, else ``LIMIT``."""
     if tree is None or not segments:
         return LIMIT
-    d = tree.query(np.concatenate(segments), k=8)[0]
-    median = 0.5 * (d[:, 3] + d[:, 4])  # np.median of the 8 sorted distances, bit for bit, without its sort
+    d = fifth_nearest(np.concatenate(segments), tree)
+    median = 0.5 * (d[:, 0] + d[:, 1])  # np.median of the 8 sorted distances, bit for bit, without its sort
     return np.clip(LOCAL_SPACINGS * median, LIMIT_MIN, LIMIT)
+
+
+def fifth_nearest(q: np.ndarray, tree: cKDTree) -> np.ndarray:
+    """(M, 2): the distances from each of ``q`` (M, 3) to its 4th and 5th nearest points of ``tree``'s cloud,
+    bit for bit ``tree.query(q, k=8)[0][:, 3:5]``: from ``spacing_grid``'s compiled search where it is
+    sure of them, else from the tree (session 26: the tree's k = 8 query cost 2.5 us a vertex, a third of
+    a refinement's smoothing)."""
+    q = np.ascontiguousarray(q, dtype=np.float64).reshape(-1, 3)
+    grid = spacing_grid(tree)
+    if grid is None or not len(q):
+        return tree.query(q, k=8)[0][:, 3:5]
+    origin, cell, dims, start, sorted_pts = grid
+    out = np.zeros((len(q), 2))
+    ok = np.zeros(len(q), np.bool_)
+    _spacing_kernel(q, origin, cell, dims, start, sorted_pts, GRID_SHELLS, out, ok)
+    if not ok.all():
+        out[~ok] = tree.query(q[~ok], k=8)[0][:, 3:5]
+    return out
+
+
+def spacing_grid(tree: cKDTree) -> tuple | None:
+    """The cloud of ``tree`` sorted into a dense grid of cubic cells (origin, cell side, dims, offsets of
+    each cell's points, the sorted points), the side the median 5th-neighbour distance of 64 of its points;
+    None for fewer than 5 points, a degenerate side or more than ``GRID_CELLS`` cells. Kept per tree."""
+    data = tree.data
+    hit = _GRIDS.get(data)
+    if hit is None:
+        hit = _GRIDS.put(data, (_build_grid(np.asarray(data), tree),))
+    return hit[0]
+
+
+def _build_grid(pts: np.ndarray, tree: cKDTree) -> tuple | None:
+    if len(pts) < 5 or not np.isfinite(pts).all():
+        return None
+    cell = GRID_SIDE * float(np.median(tree.query(pts[:: max(1, len(pts) // 64)], k=5)[0][:, 4]))
+    if not cell > 0:
+        return None
+    origin = pts.min(axis=0)
+    dims = np.floor(np.ptp(pts, axis=0) / cell).astype(np.int64) + 1
+    if float(np.prod(dims.astype(np.float64))) > GRID_CELLS:
+        return None
+    idx = np.minimum(np.floor((pts - origin) / cell).astype(np.int64), dims - 1)
+    lin = (idx[:, 0] * dims[1] + idx[:, 1]) * dims[2] + idx[:, 2]
+    order = np.argsort(lin, kind="stable")
+    start = np.r_[0, np.cumsum(np.bincount(lin, minlength=int(np.prod(dims))))].astype(np.int64)
+    return origin, cell, dims, start, np.ascontiguousarray(pts[order])
+
+
+@njit(cache=True)
+def _spacing_kernel(q, origin, cell, dims, start, pts, shells, out, ok):  # pragma: no cover - numba
+    """``fifth_nearest`` by the grid: the five least squared distances ((dx^2 + dy^2) + dz^2, as cKDTree
+    sums three coordinates) over rings of cells round each vertex's cell, ring by ring, until the fifth is
+    below the distance every unvisited cell keeps from the vertex (ring * side + the vertex's margin in its
+    own cell, less a relative 1e-9 for the cells' rounding); their square roots (cKDTree's distances) of
+    the 4th and 5th into ``out``, ``ok`` set. A vertex not settled within ``shells`` rings is left."""
+    best = np.zeros(5)
+    c = np.zeros(3, np.int64)
+    for p in range(q.shape[0]):
+        best[:] = np.inf
+        if not (np.isfinite(q[p, 0]) and np.isfinite(q[p, 1]) and np.isfinite(q[p, 2])):
+            continue
+        margin = np.inf
+        for a in range(3):
+            f = (q[p, a] - origin[a]) / cell
+            c[a] = int(np.floor(f))
+            lo = q[p, a] - (origin[a] + c[a] * cell)
+            hi = (origin[a] + (c[a] + 1) * cell) - q[p, a]
+            margin = min(margin, max(0.0, min(lo, hi)))
+        for s in range(shells + 1):
+            for ix in range(c[0] - s, c[0] + s + 1):
+                if ix < 0 or ix >= dims[0]:
+                    continue
+                for iy in range(c[1] - s, c[1] + s + 1):
+                    if iy < 0 or iy >= dims[1]:
+                        continue
+                    for iz in range(c[2] - s, c[2] + s + 1):
+                        if iz < 0 or iz >= dims[2]:
+                            continue
+                        if max(abs(ix - c[0]), abs(iy - c[1]), abs(iz - c[2])) != s:
+                            continue
+                        lin = (ix * dims[1] + iy) * dims[2] + iz
+                        for t in range(start[lin], start[lin + 1]):
+                            dx, dy, dz = q[p, 0] - pts[t, 0], q[p, 1] - pts[t, 1], q[p, 2] - pts[t, 2]
+                            d = dx * dx + dy * dy + dz * dz
+                            if d < best[4]:
+                                u = 4
+                                while u > 0 and best[u - 1] > d:
+                                    best[u] = best[u - 1]
+                                    u -= 1
+                                best[u] = d
+            if np.sqrt(best[4]) < (s * cell + margin) * (1.0 - 1e-9):
+                out[p, 0], out[p, 1] = np.sqrt(best[3]), np.sqrt(best[4])
+                ok[p] = True
+                break
 
 
 def smooth_polylines(segments: list[np.ndarray], limit: float | np.ndarray = LIMIT, iterations: int = ITERATIONS,
@@ -62,7 +169,7 @@ def smooth_polylines(segments: list[np.ndarray], limit: float | np.ndarray = LIM
         return [s.copy() for s in segments]
     steps = np.array([-INFLATE if (it % 2 and INFLATE) else weight for it in range(iterations)], np.float64)
     _smooth_kernel(flat, orig, idx, np.ascontiguousarray(lim), steps)
-    return np.split(flat, np.cumsum(lens)[:-1])
+    return [flat] if len(segments) == 1 else np.split(flat, np.cumsum(lens)[:-1])  # one: no np.split (20 us)
 
 
 @njit(cache=True)
@@ -119,3 +226,4 @@ def smooth_branchset(kept: BranchSet, tree: cKDTree | None = None, iterations: i
 def warm() -> None:
     """Run ``_smooth_kernel`` once on a three-vertex polyline (see ``tetloops.warm``)."""
     smooth_polylines([np.array([[0.0, 0, 0], [0, 0, 1], [0, 0, 2]])], np.full(3, 0.01))
+    vertex_limits([np.zeros((2, 3))], cKDTree(np.arange(30.0).reshape(10, 3) / 30.0))
