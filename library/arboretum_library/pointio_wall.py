@@ -28,14 +28,18 @@ WALL_MORE = 300
 """... and this many lines more, drawn after those (the first ``WALL_TRIES`` are the lines tried until
 session 25). Both points of a line lie on a wall holding a tenth of the lower half's points once in 100
 tries, so 100 lines miss it 37 times in 100 and 400 lines twice (helper-177: a wall 3 heights long on
-stairs beside scan 07 or the harmonic cherry was missed; 8 of 264 stairs-and-wall files more read right)."""
+stairs beside scan 07 or the harmonic cherry was missed; 8 of 264 stairs-and-wall files more read right).
+When the best of all the lines is no wall, the best of the first ``WALL_TRIES`` is tried too: the best of
+400 was sometimes a line through crown and wall that failed ``WALL_THIN`` or ``WALL_LOW`` where the first
+100 had found the wall (helper-185: 5 of 1,728 wall files beside the leaf-off harmonic walnut newly wrong)."""
 
 
 def _wall(pts: np.ndarray, axis: int) -> np.ndarray:
     """(N,) bool: the points of a wall (or a fence) standing along ``axis`` beside the tree, all False
     when none. On ``WALL_SAMPLE`` points drawn at random (fixed; with repeats; all of a smaller cloud),
     the line in the footprint across ``axis`` holding the most of the lower half's points within a quarter
-    of ``WALL_BAND`` (``WALL_TRIES`` + ``WALL_MORE`` lines through two of them) is a wall when that thin band
+    of ``WALL_BAND`` (``WALL_TRIES`` + ``WALL_MORE`` lines through two of them; failing that, the best of
+    the first ``WALL_TRIES``, ``_wall_along``) is a wall when that thin band
     holds ``WALL_SHARE`` of the points and ``WALL_THIN`` of those within ``WALL_BAND`` (a wall is thin; a
     slice of crown is not), and 90 % of them lie in the lowest ``WALL_LOW`` of the extent along ``axis`` (a wall
     is lower than the tree; a row's trunks are not). Its points there are the wall (a crown may reach over
@@ -60,14 +64,27 @@ def _wall(pts: np.ndarray, axis: int) -> np.ndarray:
     n = np.stack([-d[:, 1], d[:, 0]], axis=1)[norm > 0] / norm[norm > 0, None]
     off = np.einsum("ij,ij->i", n, a[norm > 0])
     band = WALL_BAND * _largest_extent(pts)
-    best = int(np.argmax((np.abs(low @ n.T - off) < 0.25 * band).sum(axis=0)))
-    dist = np.abs(np.delete(sub, axis, axis=1) @ n[best] - off[best])
+    held = (np.abs(low @ n.T - off) < 0.25 * band).sum(axis=0)
+    first = (norm > 0)[:WALL_TRIES].sum()  # the lines tried until session 25
+    for best in dict.fromkeys([int(np.argmax(held)), int(np.argmax(held[:first])) if first else -1]):
+        wall = _wall_along(pts, axis, sub, n[best], off[best], band, top) if best >= 0 else none
+        if wall.any():
+            return wall
+    return none
+
+
+def _wall_along(pts: np.ndarray, axis: int, sub: np.ndarray, normal: np.ndarray, off: float, band: float,
+                top: float) -> np.ndarray:
+    """(N,) bool: ``_wall``'s test of the line ``normal`` . p = ``off`` across ``axis`` (on the sample ``sub``),
+    all False when it is no wall; else the wall's points."""
+    none = np.zeros(len(pts), dtype=bool)
+    dist = np.abs(np.delete(sub, axis, axis=1) @ normal - off)
     thin = dist < 0.25 * band
     if thin.mean() < WALL_SHARE or thin.sum() < max(WALL_KEEP, WALL_THIN * (dist < band).sum()):
         return none
     if (sub[thin, axis] < top).mean() < 0.9:
         return none
-    wall = (np.abs(np.delete(pts, axis, axis=1) @ n[best] - off[best]) < band) & (pts[:, axis] < top)
+    wall = (np.abs(np.delete(pts, axis, axis=1) @ normal - off) < band) & (pts[:, axis] < top)
     return wall if (~wall).sum() >= WALL_KEEP else none
 
 
@@ -81,7 +98,8 @@ def _walls_beside(pts: np.ndarray, axes: tuple) -> np.ndarray | None:
     """(N,) bool: the walls (``_wall``) standing along the axes without ground at either end (``axes``: (axis,
     way up, ``GROUND_BONUS`` in its score, ground at either end) for Z and Y, ground along one at most),
     None when there is none. A wall found along one axis while the other has ground under it is taken
-    only when that ground is gone without it (``_ground_was_face``: it was the wall's face); else it is
+    only when that ground is gone without it, its whole face up to its top (``_ground_was_face``,
+    ``_whole_face``: it was the wall's face); else it is
     that ground's lowest level seen edge on (stairs along Y, the wall facing X: seen along Y the flat
     ground below the flight is a thin line low along Y, and Z lost its bonus: 45 of 88 files wrong)."""
     wall = np.zeros(len(pts), dtype=bool)
@@ -89,9 +107,20 @@ def _walls_beside(pts: np.ndarray, axes: tuple) -> np.ndarray | None:
         if any_ground:
             continue
         found = _wall(pts, axis)
-        if found.any() and _ground_was_face(pts, found, axes[1 - k]):
+        if found.any() and _ground_was_face(pts, _whole_face(pts, found, axis), axes[1 - k]):
             wall |= found
     return wall if wall.any() else None
+
+
+def _whole_face(pts: np.ndarray, wall: np.ndarray, axis: int) -> np.ndarray:
+    """(N,) bool: ``wall`` and the points within ``WALL_BAND`` of its line across ``axis`` above it: the
+    wall's face up to its top (``_wall`` keeps only what lies in the lowest ``WALL_LOW`` of the extent; a
+    wall half a tree's height tall left 307 points of its top over it, and the other axis still found
+    ground there: helper-185, the leaf-off eucalyptus beside such a wall, 3 of 1,728 files newly wrong)."""
+    xy = np.delete(pts, axis, axis=1)
+    mid = xy[wall].mean(axis=0)
+    normal = np.linalg.svd(xy[wall] - mid, full_matrices=False)[2][-1]
+    return wall | (np.abs((xy - mid) @ normal) < WALL_BAND * _largest_extent(pts))
 
 
 def _ground_was_face(pts: np.ndarray, wall: np.ndarray, other: tuple) -> bool:
