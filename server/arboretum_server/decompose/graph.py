@@ -383,7 +383,7 @@ def path_after_cut(adj: csr_matrix, rows: np.ndarray, base: np.ndarray, cut: np.
     go to ``shortest_path_to``."""
     a = adj.tocsr()
     data = np.ascontiguousarray(a.data, np.float64)
-    dist = _repaired(a.indptr, a.indices, data, np.array(base, np.float64), rows, cut)
+    dist = _repaired_to(a.indptr, a.indices, data, np.array(base, np.float64), rows, cut, int(target))
     path, unique = _unique_walk(a.indptr, a.indices, data, dist, int(root), int(target))
     if unique == 1:
         return path
@@ -393,12 +393,23 @@ def path_after_cut(adj: csr_matrix, rows: np.ndarray, base: np.ndarray, cut: np.
     return path_to(shortest_path_to(a, root, target, np.array([root, target])), int(target))
 
 
-@njit(cache=True)
-def _repaired(indptr, indices, data, dist, rows, cut):  # pragma: no cover - numba
+def _repaired(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, dist: np.ndarray, rows: np.ndarray,
+              cut: np.ndarray) -> np.ndarray:
     """``dist`` (N,) lowered in place to the fixed point of Dijkstra's relaxation over the CSR graph: the ``cut``
     entries relaxed first, then every lowered node relaxes its edges, nearest first (a heap of (distance,
-    node), stale entries skipped; a node lowered again is queued again)."""
-    hd = np.zeros(indices.shape[0] + cut.shape[0] + 1)
+    node), stale entries skipped; a node lowered again is queued again). ``_repaired_to`` run to the end."""
+    return _repaired_to(indptr, indices, data, dist, rows, cut, -1)
+
+
+@njit(cache=True)
+def _repaired_to(indptr, indices, data, dist, rows, cut, target):  # pragma: no cover - numba
+    """``_repaired``, stopped once the heap's nearest entry lies beyond ``dist[target]`` (never for ``target``
+    -1). Session 26: every later entry, and so every later lowered value, is at least that entry's distance,
+    so each node at or below ``dist[target]`` already holds its fixed-point value and every node above it
+    stays above it: the walk back from ``target`` (``_unique_walk``, ``tied_path``: neighbours ``u`` with
+    ``dist[u] + w == dist[v] <= dist[target]``, ``w >= 0``) sees the same ties as after the full repair.
+    The nodes beyond keep values no lower than their fixed point's (read by nothing else)."""
+    hd = np.zeros(indices.shape[0] + cut.shape[0] + 1)  # a node is settled once: at most one push per entry
     hn = np.zeros(indices.shape[0] + cut.shape[0] + 1, np.int64)
     size = 0
     for e in cut:
@@ -408,6 +419,8 @@ def _repaired(indptr, indices, data, dist, rows, cut):  # pragma: no cover - num
             size = _push(hd, hn, size, nd, indices[e])
     while size > 0:
         d, v = hd[0], hn[0]
+        if target >= 0 and d > dist[target]:
+            break
         size = _pop(hd, hn, size)
         if d > dist[v]:
             continue  # stale: lowered again since

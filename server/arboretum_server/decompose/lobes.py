@@ -23,9 +23,12 @@ from scipy.spatial import ConvexHull, Delaunay, QhullError, cKDTree
 
 from .tetloops import boundary as _boundary
 from .tetloops import circumspheres as _circumspheres
+from .tetloops import covered as _covered
+from .tetloops import drop_edges as _drop_edges
 from .tetloops import flat as _flat
 from .tetloops import held as _held
 from .tetloops import is_closed_manifold as is_closed_manifold
+from .tetloops import orient as _orient
 
 MIN_COVER = 0.95
 """Smallest fraction of a cluster's points the alpha shape must touch; otherwise the convex hull."""
@@ -127,20 +130,13 @@ class Tetrahedra:
             pinched = _pinched_edges(faces)
             if not len(pinched):
                 break
-            keep[keep] = ~_has_edge(self.tets[keep], pinched)
+            _drop_edges(self.tets, keep, pinched)
             if not keep.any():
                 break
             faces, opp = _boundary(self.tets, self.neighbours, keep)
-        used = np.zeros(len(self.points), bool)
-        used[self.tets[keep].ravel()] = True
-        if not keep.any() or used.sum() < MIN_COVER * self.n_own:
+        if not keep.any() or _covered(self.tets, keep, len(self.points)) < MIN_COVER * self.n_own:
             return None
-        points = self.points
-        f = points[faces]
-        n = np.cross(f[:, 1] - f[:, 0], f[:, 2] - f[:, 0])
-        flip = ((points[opp] - f[:, 0]) * n).sum(axis=1) > 0
-        faces[flip] = faces[flip][:, [0, 2, 1]]
-        return _compact(points, faces)
+        return _compact(self.points, _orient(self.points, faces, opp))
 
 
 def _walled_in(neighbours: np.ndarray, flat: np.ndarray, keep: np.ndarray) -> np.ndarray:
@@ -219,8 +215,12 @@ _EDGE_A, _EDGE_B = [0, 0, 0, 1, 1, 2], [1, 2, 3, 2, 3, 3]
 
 
 def _compact(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    used, inv = np.unique(faces, return_inverse=True)
-    return points[used].copy(), inv.reshape(-1, 3).astype(np.int32)
+    """(the points ``faces`` (F, 3) use, in index order; the faces renumbered into them, int32): what
+    ``np.unique(faces, return_inverse=True)`` gives, by a mask and its running count instead of a sort."""
+    mark = np.zeros(len(points), bool)
+    mark[faces.ravel()] = True
+    rank = np.cumsum(mark) - 1
+    return points[mark], rank[faces].astype(np.int32)
 
 
 def convex_hull(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

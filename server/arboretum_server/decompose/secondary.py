@@ -231,7 +231,8 @@ class _Route(NamedTuple):
     tree: cKDTree
     cache: dict
     """The per-edge zone weights of ``foreign_graph``, built at the first reroute of a ``make_lobes`` call, and
-    the distances on the graph where every zone is foreign (``_reroute_path``), and the routes of the lobes
+    each rerouted lobe's own zone edges (``_own_entries``), the distances on the graph where every zone is
+    foreign (``_reroute_path``), and the routes of the lobes
     routed again in one batch at the first reroute (``_batch_routes``), by lobe, until their ``_reroute``."""
     pred: np.ndarray
     """(N,) the shared routing's predecessors."""
@@ -260,11 +261,21 @@ def foreign_graph(r: _Route, j: int) -> csr_matrix:
     takes its dearer end's cost, as in ``weighted``: this relies on 1 <= ``ZONE_COST`` <= ``FOREIGN_COST``)."""
     if "edges" not in r.cache:
         r.cache["edges"] = _edge_zones(r.adjacency, r.zone)
-    adj, dear, owner = r.cache["edges"]
+    adj, dear, _ = r.cache["edges"]
     w = dear.copy()
-    own = np.flatnonzero(owner == j)
+    own = _own_entries(r, j)
     w[own] = adj.data[own] * ZONE_COST
     return csr_matrix((w, adj.indices, adj.indptr), shape=adj.shape)
+
+
+def _own_entries(r: _Route, j: int) -> np.ndarray:
+    """``np.flatnonzero(owner == j)`` for the edge owners of ``_edge_zones``: the entries of lobe ``j``'s own zone
+    edges, found once per lobe and ``make_lobes`` call (``r.cache["owned"]``): ``foreign_graph`` and
+    ``_reroute_path`` each scanned every edge for them."""
+    owned = r.cache.setdefault("owned", {})
+    if j not in owned:
+        owned[j] = np.flatnonzero(r.cache["edges"][2] == j)
+    return owned[j]
 
 
 def _reroute_path(r: _Route, j: int, graph: csr_matrix, target: int) -> np.ndarray:
@@ -274,11 +285,11 @@ def _reroute_path(r: _Route, j: int, graph: csr_matrix, target: int) -> np.ndarr
     (``graph.path_after_cut``)."""
     if "edges" not in r.cache:
         r.cache["edges"] = _edge_zones(r.adjacency, r.zone)
-    adj, dear, owner = r.cache["edges"]
+    adj, dear, _ = r.cache["edges"]
     if "base" not in r.cache:
         r.cache["rows"] = np.repeat(np.arange(adj.shape[0]), np.diff(adj.indptr))
         r.cache["base"] = shortest_paths(csr_matrix((dear, adj.indices, adj.indptr), shape=adj.shape), r.root)[0]
-    return path_after_cut(graph, r.cache["rows"], r.cache["base"], np.flatnonzero(owner == j), r.root, target)
+    return path_after_cut(graph, r.cache["rows"], r.cache["base"], _own_entries(r, j), r.root, target)
 
 
 def _crosses(lobes: list[LobeState], j: int, raw: np.ndarray, smooth: np.ndarray, tol: float,

@@ -267,6 +267,97 @@ def _closed_kernel(faces: np.ndarray, n: int, one_piece: bool) -> bool:  # pragm
     return pieces == 1
 
 
+def covered(tets: np.ndarray, keep: np.ndarray, n: int) -> int:
+    """How many of the ``n`` points are a corner of a kept tetrahedron (``tets`` (T, 4), ``keep`` (T,) bool).
+    A compiled loop, the same count as ``covered_reference`` (session 26: the gather of the kept
+    tetrahedra took a third of an alpha shape's time)."""
+    return int(_covered_kernel(np.ascontiguousarray(tets), np.ascontiguousarray(keep, dtype=np.bool_), n))
+
+
+def covered_reference(tets: np.ndarray, keep: np.ndarray, n: int) -> int:
+    """``covered`` in numpy (the code before)."""
+    used = np.zeros(n, bool)
+    used[tets[keep].ravel()] = True
+    return int(used.sum())
+
+
+@njit(cache=True)
+def _covered_kernel(tets, keep, n):  # pragma: no cover - numba
+    used = np.zeros(n, np.bool_)
+    count = 0
+    for t in range(tets.shape[0]):
+        if keep[t]:
+            for c in range(4):
+                v = tets[t, c]
+                if not used[v]:
+                    used[v] = True
+                    count += 1
+    return count
+
+
+def orient(points: np.ndarray, faces: np.ndarray, opp: np.ndarray) -> np.ndarray:
+    """``faces`` (F, 3) with the last two corners swapped on each face whose normal (``np.cross`` of its
+    edges from corner 0) points towards its opposite vertex ``opp`` (F,): every face then faces away from
+    its tetrahedron. A compiled loop, the same float operations as ``orient_reference`` (``np.cross``'s
+    products then difference, the dot product summed left to right), so the same faces."""
+    out = np.ascontiguousarray(faces).copy()
+    _orient_kernel(np.ascontiguousarray(points, dtype=np.float64), out, np.ascontiguousarray(opp))
+    return out
+
+
+def orient_reference(points: np.ndarray, faces: np.ndarray, opp: np.ndarray) -> np.ndarray:
+    """``orient`` in numpy (the code before)."""
+    faces = faces.copy()
+    f = points[faces]
+    n = np.cross(f[:, 1] - f[:, 0], f[:, 2] - f[:, 0])
+    flip = ((points[opp] - f[:, 0]) * n).sum(axis=1) > 0
+    faces[flip] = faces[flip][:, [0, 2, 1]]
+    return faces
+
+
+@njit(cache=True)
+def _orient_kernel(p, faces, opp):  # pragma: no cover - numba
+    for i in range(faces.shape[0]):
+        a, b, c, o = faces[i, 0], faces[i, 1], faces[i, 2], opp[i]
+        u0, u1, u2 = p[b, 0] - p[a, 0], p[b, 1] - p[a, 1], p[b, 2] - p[a, 2]
+        v0, v1, v2 = p[c, 0] - p[a, 0], p[c, 1] - p[a, 1], p[c, 2] - p[a, 2]
+        n0, n1, n2 = u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0
+        d0, d1, d2 = p[o, 0] - p[a, 0], p[o, 1] - p[a, 1], p[o, 2] - p[a, 2]
+        if (d0 * n0 + d1 * n1) + d2 * n2 > 0:
+            faces[i, 1], faces[i, 2] = c, b
+
+
+def drop_edges(tets: np.ndarray, keep: np.ndarray, edges: np.ndarray) -> None:
+    """Clear ``keep`` (T,) bool, in place, at the kept tetrahedra (``tets`` (T, 4)) holding one of ``edges``
+    (sorted unique keys ``lo * 2**32 + hi``, ``lobes._edge_keys``). A compiled loop (binary search per
+    edge), the same mask as ``drop_edges_reference``."""
+    _drop_kernel(np.ascontiguousarray(tets), keep, np.ascontiguousarray(edges, dtype=np.int64))
+
+
+def drop_edges_reference(tets: np.ndarray, keep: np.ndarray, edges: np.ndarray) -> None:
+    """``drop_edges`` with ``np.isin`` over every kept tetrahedron's six edge keys (the code before)."""
+    kept = tets[keep]
+    a, b = kept[:, [0, 0, 0, 1, 1, 2]].ravel(), kept[:, [1, 2, 3, 2, 3, 3]].ravel()
+    lo, hi = np.minimum(a, b).astype(np.int64), np.maximum(a, b).astype(np.int64)
+    keep[keep] = ~np.isin(lo * (1 << 32) + hi, edges).reshape(-1, 6).any(axis=1)
+
+
+@njit(cache=True)
+def _drop_kernel(tets, keep, edges):  # pragma: no cover - numba
+    ea = (0, 0, 0, 1, 1, 2)
+    eb = (1, 2, 3, 2, 3, 3)
+    for t in range(tets.shape[0]):
+        if not keep[t]:
+            continue
+        for k in range(6):
+            a, b = np.int64(tets[t, ea[k]]), np.int64(tets[t, eb[k]])
+            key = min(a, b) * (np.int64(1) << 32) + max(a, b)
+            i = np.searchsorted(edges, key)
+            if i < edges.shape[0] and edges[i] == key:
+                keep[t] = False
+                break
+
+
 def warm() -> None:
     """Run every loop here once on a tiny input of the dtypes the alpha shapes use (scipy's int32
     simplices), so numba loads or compiles them now: the service calls it when it starts
@@ -277,3 +368,7 @@ def warm() -> None:
     held(centre, r, np.zeros((1, 3)))
     boundary(np.array([[0, 1, 2, 3]], np.int32), np.full((1, 4), -1, np.int32), np.ones(1, bool))
     is_closed_manifold(np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]))
+    tet, keep = np.array([[0, 1, 2, 3]], np.int32), np.ones(1, bool)
+    covered(tet, keep, 4)
+    orient(p[0], tet[:, :3], tet[:, 3])
+    drop_edges(tet, keep, np.array([1], np.int64))
