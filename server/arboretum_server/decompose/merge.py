@@ -27,7 +27,7 @@ from arboretum_library.geometry import polyline_lengths
 
 from .grid import BoxGrid
 from .memo import ArrayMemo
-from .similarity import assignment_costs, resample_all, shape_contexts
+from .similarity import arc_lengths, assignment_costs, resample_all, shape_contexts
 
 
 def resample_step(points: np.ndarray, step: float) -> np.ndarray:
@@ -57,13 +57,7 @@ def _resample_kernel(pts: np.ndarray, step: float) -> np.ndarray:  # pragma: no 
     order (``np.linalg.norm`` of the differences, a running sum, ``np.linspace``'s i * (length / (n - 1))
     with the end set to the length, and ``np.interp``'s interval search, slopes and exact hits)."""
     m = pts.shape[0]
-    s = np.zeros(m)
-    s[0] = 0.0
-    acc = 0.0
-    for i in range(1, m):
-        dx, dy, dz = pts[i, 0] - pts[i - 1, 0], pts[i, 1] - pts[i - 1, 1], pts[i, 2] - pts[i - 1, 2]
-        acc += np.sqrt(dx * dx + dy * dy + dz * dz)
-        s[i] = acc
+    s = arc_lengths(pts)
     length = s[m - 1]
     if not np.isfinite(length):
         return np.zeros((0, 3))  # the reference's nan handling is not copied

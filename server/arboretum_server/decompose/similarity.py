@@ -272,6 +272,22 @@ def chi_squares(h1: np.ndarray, h2s: np.ndarray, which: np.ndarray) -> np.ndarra
 
 
 @njit(cache=True)
+def _add_bin(h1: np.ndarray, h2: np.ndarray, rows: np.ndarray, count: np.ndarray, c: int,
+             dest: np.ndarray) -> None:  # pragma: no cover - numba
+    """Bin ``c``'s chi-square terms a b / (a + b) of the ``count[c]`` rows of ``h1`` filled there (``rows``)
+    against the rows of ``h2`` filled there, each added into ``dest[i, j]`` ((n1, n2): a running sum)."""
+    if count[c] == 0:
+        return
+    for j in range(h2.shape[0]):
+        b = h2[j, c]
+        if b != 0.0:
+            for t in range(count[c]):
+                i = rows[c, t]
+                a = h1[i, c]
+                dest[i, j] += a * b / (a + b)
+
+
+@njit(cache=True)
 def _chi_squares_kernel(h1: np.ndarray, h2s: np.ndarray, which: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - numba
     """``chi_squares``' loop: for each bin c below the last k % 8 (numpy's eight running sums), the rows of
     ``h1`` filled there against the rows of ``h2s[w]`` filled there, each term a b / (a + b) added to the
@@ -292,29 +308,13 @@ def _chi_squares_kernel(h1: np.ndarray, h2s: np.ndarray, which: np.ndarray, out:
         h2 = h2s[which[w]]
         acc[:] = 0.0
         for c in range(block):
-            if count[c] == 0:
-                continue
-            for j in range(n2):
-                b = h2[j, c]
-                if b != 0.0:
-                    for t in range(count[c]):
-                        i = rows[c, t]
-                        a = h1[i, c]
-                        acc[i, j, c % 8] += a * b / (a + b)
+            _add_bin(h1, h2, rows, count, c, acc[:, :, c % 8])
         for i in range(n1):
             for j in range(n2):
                 out[w, i, j] = ((acc[i, j, 0] + acc[i, j, 1]) + (acc[i, j, 2] + acc[i, j, 3])) + \
                     ((acc[i, j, 4] + acc[i, j, 5]) + (acc[i, j, 6] + acc[i, j, 7]))
         for c in range(block, k):
-            if count[c] == 0:
-                continue
-            for j in range(n2):
-                b = h2[j, c]
-                if b != 0.0:
-                    for t in range(count[c]):
-                        i = rows[c, t]
-                        a = h1[i, c]
-                        out[w, i, j] += a * b / (a + b)
+            _add_bin(h1, h2, rows, count, c, out[w])
         for i in range(n1):
             for j in range(n2):
                 out[w, i, j] = 1.0 - 2.0 * out[w, i, j]
@@ -349,6 +349,20 @@ def resample_all_reference(polylines: list[np.ndarray], n: int) -> np.ndarray:
 
 
 @njit(cache=True)
+def arc_lengths(pts: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+    """(M,) the running sum of the lengths ((dx^2 + dy^2) + dz^2 under the root, ``np.linalg.norm``'s
+    order) of the steps of the polyline ``pts`` (M >= 1, 3), 0 first."""
+    m = pts.shape[0]
+    s = np.zeros(m)
+    acc = 0.0
+    for i in range(1, m):
+        dx, dy, dz = pts[i, 0] - pts[i - 1, 0], pts[i, 1] - pts[i - 1, 1], pts[i, 2] - pts[i - 1, 2]
+        acc += np.sqrt(dx * dx + dy * dy + dz * dz)
+        s[i] = acc
+    return s
+
+
+@njit(cache=True)
 def _resample_n_kernel(flat: np.ndarray, starts: np.ndarray, lens: np.ndarray, out: np.ndarray) -> bool:  # pragma: no cover - numba
     """``resample_polyline`` of each polyline ``flat[starts[b]:starts[b] + lens[b]]`` to ``out[b]`` (n, 3); False
     on a non-finite length. The same float operations as ``merge._resample_kernel``: norms of the
@@ -359,12 +373,7 @@ def _resample_n_kernel(flat: np.ndarray, starts: np.ndarray, lens: np.ndarray, o
     for b in range(len(lens)):
         pts = flat[starts[b]:starts[b] + lens[b]]
         m = pts.shape[0]
-        s = np.zeros(m)
-        acc = 0.0
-        for i in range(1, m):
-            dx, dy, dz = pts[i, 0] - pts[i - 1, 0], pts[i, 1] - pts[i - 1, 1], pts[i, 2] - pts[i - 1, 2]
-            acc += np.sqrt(dx * dx + dy * dy + dz * dz)
-            s[i] = acc
+        s = arc_lengths(pts)
         length = s[m - 1]
         if not np.isfinite(length):
             return False
@@ -401,5 +410,8 @@ def warm() -> None:
     chi_square(np.eye(2, 120), np.eye(2, 120))
     chi_squares(np.eye(2, 120), np.eye(2, 120)[None], np.zeros(1, np.int64))
     shape_contexts(resample_all([np.array([[0.0, 0, 0], [0, 0, 1], [0, 1, 1]])], 4))
-    _block_sum(np.ones(3), 0, 3)  # the loops ``_contexts_kernel`` calls, compiled on their own too
+    _block_sum(np.ones(3), 0, 3)  # the loops the kernels call, compiled on their own too
+    _add_bin(np.eye(2, 120), np.eye(2, 120), np.zeros((120, 2), np.int64), np.zeros(120, np.int64), 0,
+             np.zeros((2, 2)))
+    arc_lengths(np.zeros((2, 3)))
     _pairwise_sum(np.ones(3), 0, 3)
