@@ -257,26 +257,39 @@ def stroke_parts(pts: np.ndarray, strokes: list[np.ndarray], j: int, unit: float
 
     extent = float(np.linalg.norm(np.ptp(pts, axis=0)))
     near = cKDTree(pts)
-    for k, s in enumerate(strokes):
-        gap = float(near.query(s)[0].min())
+    starts = np.cumsum([0] + [len(s) for s in strokes[:-1]])
+    gaps = np.minimum.reduceat(near.query(np.concatenate(strokes))[0], starts)  # one query for all strokes
+    for k, gap in enumerate(gaps.tolist()):
         if gap > STROKE_REACH * extent:
             raise InputError(f"split lobe: stroke {k} passes {gap * unit:.3g} m from lobe {j}'s points at its "
                              f"nearest (the lobe is {extent * unit:.3g} m across); draw each stroke over the part "
                              "of the lobe it should keep")
     seeds = _seeds(strokes)
-    centres = np.concatenate(seeds)
     of = np.repeat(np.arange(len(strokes)), [len(x) for x in seeds])
-    for _ in range(LLOYD_ROUNDS):
-        nearest = cKDTree(centres).query(pts)[1]
-        count = np.bincount(nearest, minlength=len(centres))
-        sums = np.stack([np.bincount(nearest, pts[:, a], minlength=len(centres)) for a in range(3)], axis=1)
-        centres = np.where(count[:, None] > 0, sums / np.maximum(count, 1)[:, None], centres)
-    owner = of[cKDTree(centres).query(pts)[1]]
+    owner = of[_lloyd(pts, np.concatenate(seeds))]
     empty = [k for k in range(len(strokes)) if not (owner == k).any()]
     if empty:
         raise InputError(f"split lobe: stroke {empty[0]} keeps no point of lobe {j}: every point lies nearer "
                          "another stroke; draw each stroke over the part of the lobe it should keep")
     return owner
+
+
+def _lloyd(pts: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """(N,) int: the centre each of ``pts`` (N, 3) is nearest after ``LLOYD_ROUNDS`` k-means rounds from
+    ``centres`` (C, 3). Stops early once a round assigns every point as the round before: the centres then
+    come out bit for bit the same, so every later round would repeat it (same result as all rounds)."""
+    from scipy.spatial import cKDTree
+
+    nearest = cKDTree(centres).query(pts)[1]
+    for _ in range(LLOYD_ROUNDS):
+        count = np.bincount(nearest, minlength=len(centres))
+        sums = np.stack([np.bincount(nearest, pts[:, a], minlength=len(centres)) for a in range(3)], axis=1)
+        centres = np.where(count[:, None] > 0, sums / np.maximum(count, 1)[:, None], centres)
+        again = cKDTree(centres).query(pts)[1]
+        if np.array_equal(again, nearest):
+            break
+        nearest = again
+    return again
 
 
 def _seeds(strokes: list[np.ndarray]) -> list[np.ndarray]:
