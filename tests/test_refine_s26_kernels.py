@@ -165,8 +165,16 @@ def test_nearest_vertex_is_the_kd_trees_or_declines_a_tie(rng):
     assert nearest_vertex(np.array([[np.nan, 0, 0]]), np.zeros(3)) == -1
 
 
-def test_has_edge_matches_one_isin_per_tetrahedron_edge(rng):
-    from arboretum_server.decompose.lobes import _edge_keys, _has_edge
+def test_drop_edges_reference_matches_one_isin_per_tetrahedron_edge(rng):
+    """``tetloops.drop_edges_reference`` (what the compiled ``drop_edges`` is held to) against the code before
+    session 26: one ``np.isin`` per tetrahedron edge."""
+    from arboretum_server.decompose.lobes import _edge_keys
+    from arboretum_server.decompose.tetloops import drop_edges_reference
+
+    def _has_edge(tets, edges):
+        keep = np.ones(len(tets), bool)
+        drop_edges_reference(tets, keep, edges)
+        return ~keep
 
     def six_isin(tets, edges):
         pairs = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]

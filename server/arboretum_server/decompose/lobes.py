@@ -204,16 +204,6 @@ def _pinched_edges(faces: np.ndarray) -> np.ndarray:
     return u[cnt > 2]
 
 
-def _has_edge(tets: np.ndarray, edges: np.ndarray) -> np.ndarray:
-    """(T,) bool: tetrahedra (T, 4) holding one of the ``edges`` (keys from ``_edge_keys``)."""
-    keys = _edge_keys(tets[:, _EDGE_A].ravel(), tets[:, _EDGE_B].ravel())  # (T * 6,): one np.isin, not six
-    return np.isin(keys, edges).reshape(-1, 6).any(axis=1)
-
-
-_EDGE_A, _EDGE_B = [0, 0, 0, 1, 1, 2], [1, 2, 3, 2, 3, 3]
-"""The six edges of a tetrahedron (T, 4) as pairs of its corner columns."""
-
-
 def _compact(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(the points ``faces`` (F, 3) use, in index order; the faces renumbered into them, int32): what
     ``np.unique(faces, return_inverse=True)`` gives, by a mask and its running count instead of a sort."""

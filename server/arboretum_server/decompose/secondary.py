@@ -259,9 +259,7 @@ def foreign_graph(r: _Route, j: int) -> csr_matrix:
     """``weighted(adjacency, cost)`` for lobe ``j``'s reroute (zone ``j`` edges ``ZONE_COST`` longer, other
     zones' ``FOREIGN_COST``), the same weights bit for bit, from the edge zones built once per call (an edge
     takes its dearer end's cost, as in ``weighted``: this relies on 1 <= ``ZONE_COST`` <= ``FOREIGN_COST``)."""
-    if "edges" not in r.cache:
-        r.cache["edges"] = _edge_zones(r.adjacency, r.zone)
-    adj, dear, _ = r.cache["edges"]
+    adj, dear, _ = _edges(r)
     w = dear.copy()
     own = _own_entries(r, j)
     w[own] = adj.data[own] * ZONE_COST
@@ -274,8 +272,15 @@ def _own_entries(r: _Route, j: int) -> np.ndarray:
     ``_reroute_path`` each scanned every edge for them."""
     owned = r.cache.setdefault("owned", {})
     if j not in owned:
-        owned[j] = np.flatnonzero(r.cache["edges"][2] == j)
+        owned[j] = np.flatnonzero(_edges(r)[2] == j)
     return owned[j]
+
+
+def _edges(r: _Route) -> tuple:
+    """``_edge_zones`` of the call's graph, built at its first reroute (``r.cache["edges"]``)."""
+    if "edges" not in r.cache:
+        r.cache["edges"] = _edge_zones(r.adjacency, r.zone)
+    return r.cache["edges"]
 
 
 def _reroute_path(r: _Route, j: int, graph: csr_matrix, target: int) -> np.ndarray:
@@ -283,9 +288,7 @@ def _reroute_path(r: _Route, j: int, graph: csr_matrix, target: int) -> np.ndarr
     ``graph.shortest_path_to`` gives, from the distances on the graph where every zone is foreign (one full
     Dijkstra per ``make_lobes`` call, kept in ``r.cache``) repaired over lobe ``j``'s own zone edges
     (``graph.path_after_cut``)."""
-    if "edges" not in r.cache:
-        r.cache["edges"] = _edge_zones(r.adjacency, r.zone)
-    adj, dear, _ = r.cache["edges"]
+    adj, dear, _ = _edges(r)
     if "base" not in r.cache:
         r.cache["rows"] = np.repeat(np.arange(adj.shape[0]), np.diff(adj.indptr))
         r.cache["base"] = shortest_paths(csr_matrix((dear, adj.indices, adj.indptr), shape=adj.shape), r.root)[0]
