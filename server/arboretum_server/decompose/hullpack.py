@@ -9,6 +9,9 @@ only faces whose XY box holds it, and all of those lie in the point's cell (``_c
 coordinate grows), so a test reads that cell's faces alone, the
 same crossings summed (session 23: with about 2 faces a cell, the leaf-on pine's slowest split into 20 went
 from 224 to 173 ms; the loops read every face of every hull a sample's box test let through).
+
+``any_inside`` answers only whether any point is inside, up to the first one (``clear.foreign``'s question),
+and the point loops try only the hulls whose box meets the points' box (``_hulls_meeting``; session 27).
 """
 
 from __future__ import annotations
@@ -230,7 +233,8 @@ def _point_inside(v, f, cells, flo, fhi, ftop, lo, hi, skip, x, y, z, tests) -> 
     """True if (x, y, z) lies inside a hull other than ``skip`` whose box strictly holds it; ``tests[0]``
     counts the hulls tried. A hull's crossings are summed over the faces of the point's grid cell only.
     The box test stays here, the face loop is ``_hull_holds``' (a call holding the box test too made this
-    kernel 25 times slower: session 23, helper-165)."""
+    kernel 25 times slower: session 23, helper-165). ``_inside_any_kernel``'s test of a point before session 27
+    (it now tries the hulls of ``_hulls_meeting`` alone, ``_sample_hull``): the tests' reference."""
     grid, cell_first, cell_start, cell_faces = cells
     for k in range(grid.shape[0]):
         if k == skip or not (lo[k, 0] < x < hi[k, 0] and lo[k, 1] < y < hi[k, 1] and lo[k, 2] < z < hi[k, 2]):
@@ -258,10 +262,77 @@ def _hull_holds(v, f, cells, flo, fhi, ftop, k, x, y, z) -> bool:  # pragma: no 
 
 @njit(cache=True)
 def _inside_any_kernel(v, f, cells, flo, fhi, ftop, lo, hi, skip, q, out) -> int:  # pragma: no cover
+    """``_point_inside`` of every point of ``q`` (into ``out``), with the hulls tried listed once per call: those
+    whose box meets the points' box (``_hulls_meeting``), ascending (session 27: a call's points are a
+    resampled branch, whose box meets a few of the tree's 60 lobe boxes; the same hulls tried per point, in
+    the same order, so the same answers and count)."""
     tests = np.zeros(1, np.int64)
+    near = np.zeros(lo.shape[0], np.int64)
+    n_near = _hulls_meeting(lo, hi, skip, q, near)
     for i in range(q.shape[0]):
-        out[i] = _point_inside(v, f, cells, flo, fhi, ftop, lo, hi, skip, q[i, 0], q[i, 1], q[i, 2], tests)
+        out[i] = _sample_hull(v, f, cells, flo, fhi, ftop, lo, hi, near, n_near, q[i, 0], q[i, 1], q[i, 2], tests) >= 0
     return tests[0]
+
+
+def any_inside(pack: HullPack, lo: np.ndarray, hi: np.ndarray, skip: int, q: np.ndarray,
+               stride: int = 4) -> tuple[bool, int]:
+    """(True if one of ``q`` (M, 3) lies inside a hull of ``pack`` other than ``skip``, hull tests):
+    ``inside_any(...)[0].any()``, the points tried every ``stride``-th first, then the rest, up to the first
+    one inside (session 27: ``clear.foreign`` asks only whether any is; most of the routes ``tunnel.along``
+    tries are blocked, and their blocked samples show up early). Each point is tested as ``inside_any`` tests
+    it; only the count of tests differs (the points after the first inside are not tried)."""
+    q = _writable(q, np.float64).reshape(-1, 3)
+    found, tests = _any_inside_kernel(pack.vertices, pack.faces, _cells(pack), pack.face_lo, pack.face_hi,
+                                      pack.face_top, _read_only(lo), _read_only(hi), int(skip), q, int(stride))
+    return bool(found), int(tests)
+
+
+@njit(cache=True)
+def _any_inside_kernel(v, f, cells, flo, fhi, ftop, lo, hi, skip, q, stride):  # pragma: no cover
+    """``any_inside``'s loop, (found, hull tests): every ``stride``-th point, then the rest, each tried against
+    the hulls whose box meets the points' box (``_hulls_meeting``) up to the first point inside one."""
+    tests = np.zeros(1, np.int64)
+    near = np.zeros(lo.shape[0], np.int64)
+    n_near = _hulls_meeting(lo, hi, skip, q, near)
+    if n_near == 0:
+        return False, tests[0]
+    for phase in range(2):
+        for i in range(q.shape[0]):
+            if (i % stride == 0) != (phase == 0):
+                continue
+            if _sample_hull(v, f, cells, flo, fhi, ftop, lo, hi, near, n_near, q[i, 0], q[i, 1], q[i, 2], tests) >= 0:
+                return True, tests[0]
+    return False, tests[0]
+
+
+@njit(cache=True)
+def _hulls_meeting(lo, hi, skip, q, near) -> int:  # pragma: no cover
+    """How many hulls (other than ``skip``) have a box that overlaps the box of the points ``q`` (M, 3) (their
+    smallest and largest coordinates, a NaN left out: it fails every box test), listed ascending in ``near``:
+    a box that strictly holds one of the points has lo < that point < hi on every axis, so it meets theirs,
+    and the hulls left out fail the box test of every point (exact, no margin: the points are tested as given)."""
+    qlo = np.full(3, np.inf)
+    qhi = np.full(3, -np.inf)
+    for i in range(q.shape[0]):
+        for ax in range(3):
+            x = q[i, ax]
+            if x < qlo[ax]:
+                qlo[ax] = x
+            if x > qhi[ax]:
+                qhi[ax] = x
+    n = 0
+    for k in range(lo.shape[0]):
+        if k == skip:
+            continue
+        ok = True
+        for ax in range(3):
+            if not (lo[k, ax] < qhi[ax] and hi[k, ax] > qlo[ax]):
+                ok = False
+                break
+        if ok:
+            near[n] = k
+            n += 1
+    return n
 
 
 SEGMENT_MARGIN = 1e-6
@@ -377,6 +448,7 @@ def warm() -> None:
     lo, hi = _read_only(v.min(axis=0)[None] - 1.0), _read_only(v.max(axis=0)[None] + 1.0)
     q = np.full((1, 3), 0.1)
     inside_any(pack, lo, hi, -1, q)
+    any_inside(pack, lo, hi, -1, q)
     segments_blocked(pack, lo, hi, -1, q, q + 0.1, np.array([3]), until_clear=True)
     segments_blocked(pack, lo, hi, -1, q, q + 0.1, np.array([3]), prior=np.array([-1]), by=np.full(1, -1))
     args = (pack.vertices, pack.faces, _cells(pack), pack.face_lo, pack.face_hi, pack.face_top)
@@ -385,4 +457,5 @@ def warm() -> None:
     _hull_holds(*args, 0, 0.1, 0.1, 0.1)
     _point_inside(*args, lo, hi, -1, 0.1, 0.1, 0.1, tests)
     _hulls_near(lo, hi, -1, q[0], q[0] + 0.1, near)
+    _hulls_meeting(lo, hi, -1, q, near)
     _sample_hull(*args, lo, hi, near, 1, 0.1, 0.1, 0.1, tests)

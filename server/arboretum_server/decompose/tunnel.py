@@ -24,6 +24,7 @@ from .clear import (
     kept_boxes,
     straight_from,
     straight_routes,
+    unit_steps,
 )
 from .lobes import inside
 from .merge import BranchSet, resample_step, sample_polylines
@@ -317,4 +318,4 @@ def _along_route_iter(branch: tuple[np.ndarray, int, int], centre: np.ndarray) -
     for v in np.argsort(length, kind="stable"):
         gap = float(np.linalg.norm(centre - seg[v]))
         m = max(2, int(np.ceil(gap / 0.01)) + 1)
-        yield np.vstack([seg[:v], seg[v] + np.linspace(0.0, 1.0, m)[:, None] * (centre - seg[v])])
+        yield np.vstack([seg[:v], seg[v] + unit_steps(m) * (centre - seg[v])])
