@@ -38,7 +38,7 @@ from .carve import part_overlaps, remember_plain, unwrap
 from .clear import bent_fallback, boxes, foreign, inside_foreign, straight_fallback
 from .graph import path_after_cut, path_to, query, shortest_paths, weighted
 from .grid import BoxGrid
-from .lobes import plain_hull
+from .lobes import plain_hulls
 from .memo import ArrayMemo
 from .merge import (
     BranchSet,
@@ -201,14 +201,17 @@ def cloud_tree(pts: np.ndarray) -> cKDTree:
 
 def _hulled(groups: list[np.ndarray], centres: np.ndarray, pts: np.ndarray, hulls: tuple[LobeState | None, ...],
             alpha_radius: float) -> list[LobeState]:
-    """A lobe (no branch yet) per group: the hull of ``hulls[i]`` when given, else the group's plain hull."""
+    """A lobe (no branch yet) per group: the hull of ``hulls[i]`` when given, else the group's plain hull (all of
+    these built at once, ``plain_hulls``: on every core; each remembered here, in group order)."""
+    olds = [hulls[i] if i < len(hulls) else None for i in range(len(groups))]
+    todo = [i for i, old in enumerate(olds) if old is None]
+    built = dict(zip(todo, plain_hulls([pts[groups[i]] for i in todo], alpha_radius)))
     out = []
-    for i, (g, c) in enumerate(zip(groups, centres)):
-        old = hulls[i] if i < len(hulls) else None
+    for i, (g, c, old) in enumerate(zip(groups, centres, olds)):
         if old is not None:
             verts, faces, used_alpha, steps = old.hull_vertices, old.hull_faces, old.alpha, old.steps
         else:
-            verts, faces, used_alpha, steps, tet = plain_hull(pts[g], alpha_radius)
+            verts, faces, used_alpha, steps, tet = built[i]
             remember_plain(g, tet)
         out.append(LobeState(g, np.asarray(c, np.float64), verts, faces, used_alpha, np.zeros((0, 3)), -1, -1,
                              steps))

@@ -42,7 +42,7 @@ def circumspheres_reference(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return centre, r
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _circumspheres_kernel(p: np.ndarray, centre: np.ndarray, r: np.ndarray) -> None:  # pragma: no cover - numba
     """``circumspheres_reference`` tetrahedron by tetrahedron: the same float operations in the same order
     (``np.cross``'s products then difference, sums over three axes left to right)."""
@@ -76,7 +76,7 @@ def flat(p: np.ndarray, tol: float) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _flat_kernel(p: np.ndarray, tol: float, out: np.ndarray) -> None:  # pragma: no cover - numba
     for t in range(p.shape[0]):
         longest = 0.0
@@ -117,7 +117,7 @@ def held(centres: np.ndarray, radii: np.ndarray, blockers: np.ndarray) -> np.nda
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _held_kernel(centres, radii, blockers, lo, size, dims, first, margin, out):  # pragma: no cover - numba
     span = np.zeros((3, 2), np.int64)
     for t in range(centres.shape[0]):
@@ -184,7 +184,7 @@ _FACE_COLUMNS = ((1, 2, 3), (0, 3, 2), (0, 1, 3), (0, 2, 1))
 """The vertices of the face opposite vertex k of a tetrahedron, in the order ``boundary`` gives them."""
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _boundary_kernel(tets, neighbours, keep):  # pragma: no cover - numba
     cols = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
     count = 0
@@ -236,7 +236,7 @@ def is_closed_manifold_reference(faces: np.ndarray, one_piece: bool = True) -> b
     return connected_components(graph, directed=False)[0] == 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _closed_kernel(faces: np.ndarray, n: int, one_piece: bool) -> bool:  # pragma: no cover - numba
     keys = np.zeros(3 * faces.shape[0], np.int64)
     for t in range(faces.shape[0]):
@@ -281,7 +281,7 @@ def covered_reference(tets: np.ndarray, keep: np.ndarray, n: int) -> int:
     return int(used.sum())
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _covered_kernel(tets, keep, n):  # pragma: no cover - numba
     used = np.zeros(n, np.bool_)
     count = 0
@@ -315,7 +315,7 @@ def orient_reference(points: np.ndarray, faces: np.ndarray, opp: np.ndarray) -> 
     return faces
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _orient_kernel(p, faces, opp):  # pragma: no cover - numba
     for i in range(faces.shape[0]):
         a, b, c, o = faces[i, 0], faces[i, 1], faces[i, 2], opp[i]
@@ -342,7 +342,7 @@ def drop_edges_reference(tets: np.ndarray, keep: np.ndarray, edges: np.ndarray) 
     keep[keep] = ~np.isin(lo * (1 << 32) + hi, edges).reshape(-1, 6).any(axis=1)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _drop_kernel(tets, keep, edges):  # pragma: no cover - numba
     ea = (0, 0, 0, 1, 1, 2)
     eb = (1, 2, 3, 2, 3, 3)
