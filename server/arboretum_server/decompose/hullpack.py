@@ -56,6 +56,8 @@ def pack_hull(vertices: np.ndarray, faces: np.ndarray) -> HullPack:
     -> 6 us a hull, which a split into 100 pieces pays for 100 new hulls)."""
     verts = np.array(vertices, dtype=np.float64).reshape(-1, 3)  # a copy: a cache keyed by the hull's arrays holds it
     faces = np.array(faces, dtype=np.int64).reshape(-1, 3)
+    if len(faces) and (faces.min() < 0 or faces.max() >= len(verts)):  # the kernels check no bounds
+        raise ValueError(f"pack_hull: face indices {faces.min()}..{faces.max()} for {len(verts)} vertices")
     if not len(faces):  # no face: one empty cell
         return HullPack(verts, faces, np.array([0, 0], np.int64), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0),
                         np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 1.0]]), np.array([0, 1], np.int64), np.zeros(2, np.int64),

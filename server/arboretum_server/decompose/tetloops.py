@@ -213,7 +213,7 @@ def is_closed_manifold(faces: np.ndarray, one_piece: bool = True) -> bool:
     edge keys, then union-find): the same answer as ``is_closed_manifold_reference`` (the tests hold the
     two together), without scipy's sparse-graph set-up, which took most of its time (session 15)."""
     faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
-    if len(faces) < 4:
+    if len(faces) < 4 or faces.min() < 0:  # numba wraps a negative index: no answer from garbage
         return False
     return bool(_closed_kernel(faces, int(faces.max()) + 1, one_piece))
 
