@@ -1,4 +1,4 @@
-"""Refinement operations under hostile input (session 27, helper-191's review: 112 cases on each of 6
+"""Refinement operations under hostile input (session 27, helper-189's review: 112 cases on each of 6
 decompositions and 410 random chains of 6 operations hit no crash, hang or invalid result). What it changed, at the input
 layer of ``refine``: an out-of-range point index is named (a uint64 index of 2**64 - 1 was wrapped to -1
 and the message only repeated the range), an empty or non-integer selection and a tree with no lobes left

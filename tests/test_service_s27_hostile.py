@@ -1,4 +1,4 @@
-"""Refinement requests a buggy client may send (session 27, helper-191: 88 hostile frames and requests against
+"""Refinement requests a buggy client may send (session 27, helper-189: 88 hostile frames and requests against
 a running server, each answered with one Error and the server serving on). A refused edit names its input,
 changes nothing and journals nothing: the draft after a restart is the draft before the refusals."""
 
