@@ -26,6 +26,7 @@ from scipy.spatial import ConvexHull, Delaunay, QhullError, cKDTree
 
 from arboretum_library import signals
 
+from .graph import query_threads
 from .tetloops import boundary as _boundary
 from .tetloops import circumspheres as _circumspheres
 from .tetloops import covered as _covered
@@ -274,11 +275,11 @@ pieces; 3-20 hulls of 50-60 points 0.82-1.02; 100 points and more 0.51-0.87)."""
 
 
 def hull_threads() -> int:
-    """Threads for ``plain_hulls``: ``OMP_NUM_THREADS`` when it is a whole number >= 1 (a batch worker sets it to
-    1: its parallelism comes from processes), else the cores this process may run on."""
-    value = os.environ.get("OMP_NUM_THREADS", "").strip()
-    if value.isdigit() and int(value) >= 1:
-        return int(value)
+    """Threads for ``plain_hulls``: ``OMP_NUM_THREADS`` when it is a whole number >= 1 (``graph.query_threads``;
+    a batch worker sets it to 1: its parallelism comes from processes), else the cores this process may run on."""
+    threads = query_threads()
+    if threads >= 1:
+        return threads
     cores = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else range(os.cpu_count() or 1)
     return max(len(cores), 1)
 
