@@ -322,13 +322,21 @@ def _hulls_meeting(lo, hi, skip, q, near) -> int:  # pragma: no cover
                 qlo[ax] = x
             if x > qhi[ax]:
                 qhi[ax] = x
+    return _boxes_meeting(lo, hi, skip, qlo, qhi, 0.0, near)
+
+
+@njit(cache=True)
+def _boxes_meeting(lo, hi, skip, qlo, qhi, margin, near) -> int:  # pragma: no cover
+    """How many of the boxes ``lo``, ``hi`` (H, 3) (other than ``skip``) overlap the box ``qlo``..``qhi`` (3,)
+    widened by ``margin`` on every side (lo < qhi + margin and hi > qlo - margin on every axis), listed
+    ascending in ``near`` (``_hulls_meeting``'s and ``_hulls_near``'s filter)."""
     n = 0
     for k in range(lo.shape[0]):
         if k == skip:
             continue
         ok = True
         for ax in range(3):
-            if not (lo[k, ax] < qhi[ax] and hi[k, ax] > qlo[ax]):
+            if not (lo[k, ax] < qhi[ax] + margin and hi[k, ax] > qlo[ax] - margin):
                 ok = False
                 break
         if ok:
@@ -426,19 +434,7 @@ def _hulls_near(lo, hi, skip, a, b, near) -> int:  # pragma: no cover
     ``SEGMENT_MARGIN``, listed ascending in ``near``: the only ones whose box can strictly hold one of its
     samples (a hull's box test fails for every sample of the others, so skipping them changes no answer
     and no count)."""
-    n = 0
-    for k in range(lo.shape[0]):
-        if k == skip:
-            continue
-        ok = True
-        for ax in range(3):
-            if lo[k, ax] >= max(a[ax], b[ax]) + SEGMENT_MARGIN or hi[k, ax] <= min(a[ax], b[ax]) - SEGMENT_MARGIN:
-                ok = False
-                break
-        if ok:
-            near[n] = k
-            n += 1
-    return n
+    return _boxes_meeting(lo, hi, skip, np.minimum(a, b), np.maximum(a, b), SEGMENT_MARGIN, near)
 
 
 def warm() -> None:
@@ -460,4 +456,5 @@ def warm() -> None:
     _point_inside(*args, lo, hi, -1, 0.1, 0.1, 0.1, tests)
     _hulls_near(lo, hi, -1, q[0], q[0] + 0.1, near)
     _hulls_meeting(lo, hi, -1, q, near)
+    _boxes_meeting(lo, hi, -1, q[0], q[0], 0.0, near)
     _sample_hull(*args, lo, hi, near, 1, 0.1, 0.1, 0.1, tests)
