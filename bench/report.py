@@ -4,6 +4,7 @@
     python -m bench.report --update   # replace the block between the markers in docs/evaluation.md
     python -m bench.report --merge    # put bench/results.partial.json's modules (``python -m bench NAME``)
                                       # into bench/results.json in place of the full run's, noting when
+    python -m bench.report --merge --note "TEXT"   # ... and why or where (e.g. another machine's run)
 """
 
 from __future__ import annotations
@@ -40,17 +41,19 @@ def table(results: dict) -> str:
         lines.append(f"| {name} | {_fmt(r['median'], r['unit'])} | {_fmt(r['target'], r['unit'])} | {met} "
                      f"| {ratio} | {r['baseline']} |")
     for rerun in results.get("reruns", []):
+        note = f" {rerun['note']}" if rerun.get("note") else ""
         lines.append(f"\nRows of {', '.join(rerun['modules'])} measured again on {rerun['when']} "
-                     f"(`python -m bench {' '.join(m.removeprefix('bench_') for m in rerun['modules'])}`).")
+                     f"(`python -m bench {' '.join(m.removeprefix('bench_') for m in rerun['modules'])}`).{note}")
     if results.get("failed_modules"):
         lines.append(f"\nModules that failed to run: {', '.join(results['failed_modules'])}.")
     return "\n".join(lines)
 
 
-def merge(full: dict, partial: dict) -> dict:
+def merge(full: dict, partial: dict, note: str = "") -> dict:
     """``full`` with the rows of every module in ``partial`` replaced by ``partial``'s, in the full run's
-    order, and the rerun recorded (``reruns``): a module measured again after a change keeps the rest of
-    the table, whose rows stay as their run measured them."""
+    order, and the rerun recorded (``reruns``, with ``note`` when given: e.g. that it ran on another
+    machine): a module measured again after a change keeps the rest of the table, whose rows stay as their
+    run measured them."""
     modules = sorted({r["module"] for r in partial["rows"]})
     fresh = {m: [r for r in partial["rows"] if r["module"] == m] for m in modules}
     rows, placed = [], set()
@@ -62,13 +65,15 @@ def merge(full: dict, partial: dict) -> dict:
             placed.add(r["module"])
     rows.extend(r for m in modules if m not in placed for r in fresh[m])
     reruns = [x for x in full.get("reruns", []) if not set(x["modules"]) <= set(modules)]
-    return {**full, "rows": rows, "reruns": reruns + [{"modules": modules, "when": partial["when"]}]}
+    rerun = {"modules": modules, "when": partial["when"]} | ({"note": note} if note else {})
+    return {**full, "rows": rows, "reruns": reruns + [rerun]}
 
 
 def main(argv: list[str]) -> int:
     if "--merge" in argv:
+        note = argv[argv.index("--note") + 1] if "--note" in argv[:-1] else ""
         merged = merge(json.loads((HERE / "results.json").read_text()),
-                       json.loads((HERE / "results.partial.json").read_text()))
+                       json.loads((HERE / "results.partial.json").read_text()), note)
         (HERE / "results.json").write_text(json.dumps(merged, indent=2) + "\n")
         print(f"merged {HERE / 'results.partial.json'} into {HERE / 'results.json'}")
         return 0

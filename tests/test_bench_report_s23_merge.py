@@ -21,3 +21,12 @@ def test_a_partial_run_replaces_its_modules_rows_in_place_and_is_noted():
     assert "Rows of bench_b measured again on T1 (`python -m bench b`)." in table(out)
     again = merge(out, {"when": "T2", "rows": [_row("bench_b", "b1", 2.4)]})
     assert again["reruns"] == [{"modules": ["bench_b"], "when": "T2"}]  # the older note of the same module goes
+
+
+def test_a_rerun_note_says_where_it_ran():
+    full = {"when": "T0", "machine": {"cpus": 2, "python": "3.11"}, "failed_modules": [],
+            "rows": [_row("bench_a", "a1", 1.0), _row("bench_b", "b1", 2.0)]}
+    out = merge(full, {"when": "T1", "rows": [_row("bench_b", "b1", 4.0)]}, "On a machine 2-4 times slower.")
+    assert out["reruns"] == [{"modules": ["bench_b"], "when": "T1", "note": "On a machine 2-4 times slower."}]
+    assert "(`python -m bench b`). On a machine 2-4 times slower." in table(out)
+    assert "note" not in merge(full, {"when": "T1", "rows": [_row("bench_b", "b1", 4.0)]})["reruns"][0]
