@@ -48,39 +48,41 @@ def _boxes(lobes):
     return [boxes(lobes), tuple(_read_only(b) for b in kept_boxes(lobes, 3))]
 
 
-def test_inside_any_gives_the_point_by_point_answers_and_counts(rng):
+def _cases(rng, skips):
+    """(pack, lo, hi, skip, q) over every lobe set, box choice, query batch and skip."""
     from arboretum_server.decompose.clear import _packed
-    from arboretum_server.decompose.hullpack import inside_any
 
-    hits = 0
     for lobes in _lobe_sets(rng):
         pack = _packed(lobes)[0]
         for lo, hi in _boxes(lobes):
             for q in _batches(rng, lobes):
-                for skip in (-1, 1):
-                    want, want_tests = _point_by_point(pack, lo, hi, skip, q)
-                    got, tests = inside_any(pack, lo, hi, skip, q)
-                    assert np.array_equal(got, want) and tests == want_tests
-                    hits += int(want.any())
+                for skip in skips:
+                    yield pack, lo, hi, skip, q
+
+
+def test_inside_any_gives_the_point_by_point_answers_and_counts(rng):
+    from arboretum_server.decompose.hullpack import inside_any
+
+    hits = 0
+    for pack, lo, hi, skip, q in _cases(rng, (-1, 1)):
+        want, want_tests = _point_by_point(pack, lo, hi, skip, q)
+        got, tests = inside_any(pack, lo, hi, skip, q)
+        assert np.array_equal(got, want) and tests == want_tests
+        hits += int(want.any())
     assert hits > 40  # points inside and outside
 
 
 def test_any_inside_is_the_any_of_inside_any_for_fewer_tests(rng):
-    from arboretum_server.decompose.clear import _packed
     from arboretum_server.decompose.hullpack import any_inside, inside_any
 
     answers, fewer = [], 0
-    for lobes in _lobe_sets(rng):
-        pack = _packed(lobes)[0]
-        for lo, hi in _boxes(lobes):
-            for q in _batches(rng, lobes):
-                for skip in (-1, 2):
-                    every, every_tests = inside_any(pack, lo, hi, skip, q)
-                    found, tests = any_inside(pack, lo, hi, skip, q)
-                    assert found == bool(every.any())
-                    assert tests == every_tests if not found else 0 < tests <= every_tests
-                    answers.append(found)
-                    fewer += tests < every_tests
+    for pack, lo, hi, skip, q in _cases(rng, (-1, 2)):
+        every, every_tests = inside_any(pack, lo, hi, skip, q)
+        found, tests = any_inside(pack, lo, hi, skip, q)
+        assert found == bool(every.any())
+        assert tests == every_tests if not found else 0 < tests <= every_tests
+        answers.append(found)
+        fewer += tests < every_tests
     assert 0 < sum(answers) < len(answers) and fewer > 20
 
 
