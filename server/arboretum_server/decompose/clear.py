@@ -24,7 +24,16 @@ from operator import attrgetter, is_
 import numpy as np
 
 from .blockers import Blockers, Pairs, own_rows
-from .hullpack import HullPack, any_inside, inside_any, join_packs, pack_hull, segments_blocked
+from .hullpack import (
+    HullPack,
+    any_inside,
+    clear_prefix,
+    first_clear_route,
+    inside_any,
+    join_packs,
+    pack_hull,
+    segments_blocked,
+)
 from .memo import ArrayMemo
 from .merge import BranchSet, resample_step
 from .state import LobeState
@@ -133,6 +142,34 @@ def foreign(lobes: list[LobeState], j: int, seg: np.ndarray, tol: float,
     WORK["hull_tests"] += tests
     return found
 
+
+
+
+def first_clear_along(lobes: list[LobeState], j: int, seg: np.ndarray, centre: np.ndarray, order: np.ndarray,
+                      counts: np.ndarray, tol: float, box: tuple[np.ndarray, np.ndarray] | None = None,
+                      clear: np.ndarray | None = None) -> tuple[int, int]:
+    """(i, resume): the first i whose route (``seg`` up to its vertex ``order[i]``, then ``counts[i]`` points
+    evenly to ``centre``: ``tunnel._along_route``) ``foreign`` finds clear, -1 for none, the routes made and
+    tested in one compiled call up to that one (``hullpack.first_clear_route``: the same answers and hull
+    tests). ``resume`` >= 0: the routes from ``resume`` on are left to the caller (one resampled to nothing).
+    ``clear`` (R,) bool, when given: every route tried and each clear one's entry set (``i`` is then -1)."""
+    pack, own = _packed(lobes)
+    lo, hi = box if box is not None else own
+    i, tests, resume = first_clear_route(pack, lo, hi, j, seg, centre, order, counts, tol, clear=clear)
+    WORK["hull_tests"] += tests
+    return i, resume
+
+
+def clear_prefix_length(lobes: list[LobeState], j: int, seg: np.ndarray, tol: float,
+                        box: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[int, int]:
+    """(ok, resume): how many of ``seg``'s first prefixes ``foreign`` finds clear in turn, up to the first it
+    does not, in one compiled call (``hullpack.clear_prefix``: the same answers and hull tests). ``resume`` >= 0:
+    the prefixes from ``seg[:resume + 1]`` on are left to the caller (``ok`` is then ``resume``)."""
+    pack, own = _packed(lobes)
+    lo, hi = box if box is not None else own
+    ok, tests, resume = clear_prefix(pack, lo, hi, j, seg, tol)
+    WORK["hull_tests"] += tests
+    return ok, resume
 
 _MAIN_VERTICES = ArrayMemo()
 """``main_vertices`` by the first main segment's array, with the segments it was computed for: the repairs

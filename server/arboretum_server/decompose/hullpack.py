@@ -22,6 +22,7 @@ import numpy as np
 from numba import njit
 
 from .lobes import face_crossing
+from .merge import _resample_kernel
 
 
 class HullPack(NamedTuple):
@@ -307,6 +308,95 @@ def _any_inside_kernel(v, f, cells, flo, fhi, ftop, lo, hi, skip, q, stride):  #
     return False, tests[0]
 
 
+
+def first_clear_route(pack: HullPack, lo: np.ndarray, hi: np.ndarray, skip: int, seg: np.ndarray,
+                      centre: np.ndarray, order: np.ndarray, counts: np.ndarray, tol: float,
+                      stride: int = 4, clear: np.ndarray | None = None) -> tuple[int, int, int]:
+    """(i, hull tests, resume): the first i whose route ``seg[:order[i]]`` then ``counts[i]`` points evenly from
+    ``seg[order[i]]`` to ``centre`` (``np.linspace``) has no vertex, resampled every ``tol``
+    (``merge.resample_step``), inside a hull other than ``skip`` (``any_inside``), -1 for none; the routes after
+    it are not made. ``tunnel.along``'s routes made and tested in one compiled call, the same floats and the
+    same hull tests as one ``clear.foreign`` call per route (session 28). ``resume`` >= 0: route ``resume``
+    resampled to nothing (a non-finite length: ``resample_step``'s reference handles it), left to the caller
+    with every route after it (``i`` is then -1 and the tests are those of the routes before it).
+    ``clear`` (R,) bool, when given: every route is tried (none is left untried after a clear one; ``i`` is then
+    -1) and ``clear[i]`` set True for each clear one."""
+    seg = _writable(seg, np.float64).reshape(-1, 3)
+    every = clear is not None
+    return _routes_kernel(pack.vertices, pack.faces, _cells(pack), pack.face_lo, pack.face_hi, pack.face_top,
+                          _read_only(lo), _read_only(hi), int(skip), seg, _writable(centre, np.float64).reshape(3),
+                          _writable(order, np.int64), _writable(counts, np.int64), float(tol), int(stride),
+                          clear if every else np.zeros(len(order), np.bool_), every)
+
+
+def clear_prefix(pack: HullPack, lo: np.ndarray, hi: np.ndarray, skip: int, seg: np.ndarray, tol: float,
+                 stride: int = 4) -> tuple[int, int, int]:
+    """(ok, hull tests, resume): how many of the prefixes ``seg[:1]``, ``seg[:2]``, ... in turn have no vertex,
+    resampled every ``tol``, inside a hull other than ``skip``, up to the first that has one (one
+    ``clear.foreign`` call per prefix, as ``tunnel._clear_prefix`` made them, in one compiled call; a one-point
+    prefix resampled as ``resample_step`` does, to that point twice). ``resume`` >= 0: prefix ``resume + 1``
+    resampled to nothing (left to the caller, as in ``first_clear_route``; ``ok`` is then ``resume``)."""
+    seg = _writable(seg, np.float64).reshape(-1, 3)
+    return _prefix_kernel(pack.vertices, pack.faces, _cells(pack), pack.face_lo, pack.face_hi, pack.face_top,
+                          _read_only(lo), _read_only(hi), int(skip), seg, float(tol), int(stride))
+
+
+
+@njit(cache=True)
+def _routes_kernel(v, f, cells, flo, fhi, ftop, lo, hi, skip, seg, centre, order, counts, tol,
+                   stride, clear, every):  # pragma: no cover - numba
+    """``first_clear_route``'s loop: each route made as ``tunnel._along_route_iter`` makes it (the prefix, then
+    ``seg[w] + t * (centre - seg[w])`` for ``np.linspace``'s t = i * (1 / (m - 1)), the last 1), resampled by
+    ``merge._resample_kernel`` and tried by ``_any_inside_kernel``."""
+    tests = 0
+    for i in range(order.shape[0]):
+        q = _resample_kernel(_along_route_kernel(seg, centre, order[i], counts[i]), tol)
+        if q.shape[0] == 0:
+            return -1, tests, i
+        found, n = _any_inside_kernel(v, f, cells, flo, fhi, ftop, lo, hi, skip, q, stride)
+        tests += n
+        clear[i] = not found
+        if not found and not every:
+            return i, tests, -1
+    return -1, tests, -1
+
+
+@njit(cache=True)
+def _along_route_kernel(seg, centre, w, m):  # pragma: no cover - numba
+    """``tunnel._along_route(seg, centre, w, m)`` bit for bit: ``seg[:w]``, then ``seg[w] + t * (centre - seg[w])``
+    for ``np.linspace(0, 1, m)``'s t (i * (1 / (m - 1)) + 0, the last 1)."""
+    route = np.zeros((w + m, 3))
+    route[:w] = seg[:w]
+    step = 1.0 / (m - 1)
+    d0, d1, d2 = centre[0] - seg[w, 0], centre[1] - seg[w, 1], centre[2] - seg[w, 2]
+    for r in range(m):
+        t = 1.0 if r == m - 1 else r * step + 0.0
+        route[w + r, 0] = seg[w, 0] + t * d0
+        route[w + r, 1] = seg[w, 1] + t * d1
+        route[w + r, 2] = seg[w, 2] + t * d2
+    return route
+
+
+@njit(cache=True)
+def _prefix_kernel(v, f, cells, flo, fhi, ftop, lo, hi, skip, seg, tol, stride):  # pragma: no cover - numba
+    """``clear_prefix``'s loop: each prefix resampled by ``merge._resample_kernel`` (a one-point prefix as that
+    point twice) and tried by ``_any_inside_kernel``."""
+    tests = 0
+    for ok in range(seg.shape[0]):
+        if ok == 0:
+            q = np.zeros((2, 3))
+            q[0] = seg[0]
+            q[1] = seg[0]
+        else:
+            q = _resample_kernel(np.ascontiguousarray(seg[:ok + 1]), tol)
+            if q.shape[0] == 0:
+                return ok, tests, ok
+        found, n = _any_inside_kernel(v, f, cells, flo, fhi, ftop, lo, hi, skip, q, stride)
+        tests += n
+        if found:
+            return ok, tests, -1
+    return seg.shape[0], tests, -1
+
 @njit(cache=True)
 def _hulls_meeting(lo, hi, skip, q, near) -> int:  # pragma: no cover
     """How many hulls (other than ``skip``) have a box that overlaps the box of the points ``q`` (M, 3) (their
@@ -449,6 +539,10 @@ def warm() -> None:
     any_inside(pack, lo, hi, -1, q)
     segments_blocked(pack, lo, hi, -1, q, q + 0.1, np.array([3]), until_clear=True)
     segments_blocked(pack, lo, hi, -1, q, q + 0.1, np.array([3]), prior=np.array([-1]), by=np.full(1, -1))
+    first_clear_route(pack, lo, hi, -1, v, q[0], np.array([1]), np.array([3]), 0.05)
+    first_clear_route(pack, lo, hi, -1, v, q[0], np.array([1]), np.array([3]), 0.05, clear=np.zeros(1, bool))
+    clear_prefix(pack, lo, hi, -1, v, 0.05)
+    _along_route_kernel(v, q[0], 1, 3)
     args = (pack.vertices, pack.faces, _cells(pack), pack.face_lo, pack.face_hi, pack.face_top)
     tests, near = np.zeros(1, np.int64), np.zeros(1, np.int64)
     _cell(pack.grid, 0, 0.1, 0)

@@ -235,7 +235,7 @@ class _Route(NamedTuple):
     cache: dict
     """The per-edge zone weights of ``foreign_graph``, built at the first reroute of a ``make_lobes`` call, and
     each rerouted lobe's own zone edges (``_own_entries``), the distances on the graph where every zone is
-    foreign (``_reroute_path``), and the routes of the lobes
+    foreign (``_reroute_path``), the reweighted graph of ``foreign_graph`` and the routes of the lobes
     routed again in one batch at the first reroute (``_batch_routes``), by lobe, until their ``_reroute``."""
     pred: np.ndarray
     """(N,) the shared routing's predecessors."""
@@ -261,12 +261,20 @@ def _edge_zones(adjacency: csr_matrix, zone: np.ndarray) -> tuple[csr_matrix, np
 def foreign_graph(r: _Route, j: int) -> csr_matrix:
     """``weighted(adjacency, cost)`` for lobe ``j``'s reroute (zone ``j`` edges ``ZONE_COST`` longer, other
     zones' ``FOREIGN_COST``), the same weights bit for bit, from the edge zones built once per call (an edge
-    takes its dearer end's cost, as in ``weighted``: this relies on 1 <= ``ZONE_COST`` <= ``FOREIGN_COST``)."""
+    takes its dearer end's cost, as in ``weighted``: this relies on 1 <= ``ZONE_COST`` <= ``FOREIGN_COST``).
+    One graph per call (``r.cache["graph"]``), its entries set for lobe ``j`` and those set for the lobe asked
+    before put back (session 28: a copy of every edge weight and a new matrix per reroute, 20 a split into 20),
+    so it holds lobe ``j``'s weights until ``foreign_graph`` is asked for another lobe of the same call."""
     adj, dear, _ = _edges(r)
-    w = dear.copy()
+    if "graph" not in r.cache:
+        r.cache["graph"] = [csr_matrix((dear.copy(), adj.indices, adj.indptr), shape=adj.shape), None]
+    graph, was = r.cache["graph"]
+    if was is not None:
+        graph.data[was] = dear[was]
     own = _own_entries(r, j)
-    w[own] = adj.data[own] * ZONE_COST
-    return csr_matrix((w, adj.indices, adj.indptr), shape=adj.shape)
+    graph.data[own] = adj.data[own] * ZONE_COST
+    r.cache["graph"][1] = own
+    return graph
 
 
 def _own_entries(r: _Route, j: int) -> np.ndarray:

@@ -18,7 +18,9 @@ from .clear import (
     bent_fallback,
     blocked,
     boxes,
+    clear_prefix_length,
     first_clear,
+    first_clear_along,
     foreign,
     inside_foreign,
     kept_boxes,
@@ -32,9 +34,10 @@ from .options import DecomposeOptions
 from .state import LobeState
 
 
-def enters(lb: LobeState, wood: np.ndarray) -> bool:
-    """True if one of the points ``wood`` (W, 3) lies inside lobe ``lb``'s hull."""
-    lo, hi = lb.hull_vertices.min(axis=0), lb.hull_vertices.max(axis=0)
+def enters(lb: LobeState, wood: np.ndarray, box: tuple[np.ndarray, np.ndarray] | None = None) -> bool:
+    """True if one of the points ``wood`` (W, 3) lies inside lobe ``lb``'s hull (``box``: its hull's box, the
+    least and greatest of its vertices, when known: ``clear.boxes`` keeps it)."""
+    lo, hi = box if box is not None else (lb.hull_vertices.min(axis=0), lb.hull_vertices.max(axis=0))
     near = wood[((wood > lo) & (wood < hi)).all(axis=1)]
     return bool(len(near) and inside(lb.hull_vertices, lb.hull_faces, near).any())
 
@@ -48,9 +51,9 @@ def lobes_entered(lobes: list[LobeState], which: list[int], woods: list[np.ndarr
         return count
     owner = np.repeat(np.arange(len(woods)), [len(w) for w in woods])
     q = np.concatenate(woods)
+    los, his = boxes(lobes)  # each hull's box, kept (session 28: not its vertices' least and greatest again)
     for k in which:
-        lb = lobes[k]
-        lo, hi = lb.hull_vertices.min(axis=0), lb.hull_vertices.max(axis=0)
+        lb, lo, hi = lobes[k], los[k], his[k]
         near = ((q > lo) & (q < hi)).all(axis=1)
         hit = np.zeros(len(woods), bool)
         hit[owner[near][inside(lb.hull_vertices, lb.hull_faces, q[near])]] = True
@@ -111,13 +114,16 @@ def carve_route(lobes: list[LobeState], n_kept: int, j: int, route: tuple[np.nda
     ``lobes`` updated) when the route is then clear and no branch enters a re-carved hull it stayed out of."""
     tol = o.step / 2
     wood = sample_polylines([route[0]], step)
-    in_way = [k for k in range(n_kept, len(lobes)) if k != j and enters(lobes[k], wood)]
+    lo, hi = boxes(lobes)
+    in_way = [k for k in range(n_kept, len(lobes)) if k != j and enters(lobes[k], wood, (lo[k], hi[k]))]
+    sampled: dict[int, np.ndarray] = {}  # each branch sampled once per call (as ``sample_polylines`` samples it)
     for with_others in (False, True):
         trial = list(lobes)
         carved = []
         for k in in_way:
-            others = [lb.segment for i, lb in enumerate(lobes) if i not in (j, k)] if with_others else []
-            blockers = np.concatenate([wood, sample_polylines(others, step)]) if others else wood
+            others = [_sampled(sampled, lobes, i, step) for i in range(len(lobes)) if i not in (j, k)] \
+                if with_others else []
+            blockers = np.concatenate([wood, *others]) if others else wood
             if carve_lobe(trial, k, pts, blockers, o.alpha_radius):
                 carved.append(k)
         trial[j] = replace(trial[j], segment=route[0], parent=route[1], parent_vertex=route[2])
@@ -127,6 +133,13 @@ def carve_route(lobes: list[LobeState], n_kept: int, j: int, route: tuple[np.nda
         if not carved:
             break  # no carving succeeded with the route alone: not retried with more blockers (not measured)
     return False
+
+
+def _sampled(kept: dict[int, np.ndarray], lobes: list[LobeState], i: int, step: float) -> np.ndarray:
+    """Lobe ``i``'s branch resampled every ``step``, made once per ``kept`` (a ``carve_route`` call's)."""
+    if i not in kept:
+        kept[i] = resample_step(lobes[i].segment, step)
+    return kept[i]
 
 
 def moved_centre(lobes: list[LobeState], j: int, pts: np.ndarray, mains: BranchSet, tries: int = 32) -> None:
@@ -178,20 +191,28 @@ def along(lobes: list[LobeState], n_kept: int, j: int, branch: tuple[np.ndarray,
     (session 23's probe) left pieces whose every straight route crossed the kept lobes round the main
     branch beside them, and their routed branches ran 3 cm deep through the lobe wrapping the trunk.
     """
-    routes = []  # made one by one up to the first clear one (session 24: 40-100 routes a piece, most unused)
     tol = o.step / 2
     box = boxes(lobes)
-    for seg in _along_route_iter(branch, lobes[j].centre):
-        routes.append(seg)
-        if not foreign(lobes, j, seg, tol, box):
-            lobes[j] = replace(lobes[j], segment=seg, parent=branch[1], parent_vertex=branch[2])
-            return True
+    seg, centre = np.asarray(branch[0], np.float64), lobes[j].centre
+    order, counts = _along_order(seg, centre)
+    # made and tested in one compiled call up to the first clear one (session 24: 40-100 routes a piece, most
+    # unused; session 28: one call, not a route and a ``foreign`` call each)
+    k, resume = first_clear_along(lobes, j, seg, centre, order, counts, tol, box)
+    for i in range(max(resume, 0), len(order) if resume >= 0 else 0):  # a route resampled to nothing
+        if not foreign(lobes, j, _along_route(seg, centre, order[i], counts[i]), tol, box):
+            k = i
+            break
+    if k >= 0:
+        route = _along_route(seg, centre, order[k], counts[k])
+        lobes[j] = replace(lobes[j], segment=route, parent=branch[1], parent_vertex=branch[2])
+        return True
     bent = _along_bent(lobes, j, branch[0], pts, tol, box)
     if bent is not None:
         lobes[j] = replace(lobes[j], segment=bent[0], centre=bent[1], parent=branch[1], parent_vertex=branch[2])
         return True
     kept = kept_boxes(lobes, n_kept)  # the kept lobes alone
-    clear = [seg for seg in routes if not foreign(lobes, j, seg, tol, kept)]
+    clear = [_along_route(seg, centre, order[i], counts[i]) for i in _clear_along(lobes, j, seg, centre, order,
+                                                                                   counts, tol, kept)]
     in_way = lobes_entered(lobes, [k for k in range(n_kept, len(lobes)) if k != j],
                            [sample_polylines([s], step) for s in clear]) if clear else np.zeros(0, int)
     if any(carve_route(lobes, n_kept, j, (clear[i], branch[1], branch[2]), pts, o, step)
@@ -201,6 +222,18 @@ def along(lobes: list[LobeState], n_kept: int, j: int, branch: tuple[np.ndarray,
     if free is not None:
         lobes[j] = replace(lobes[j], segment=free, parent=branch[1], parent_vertex=branch[2])
     return free is not None
+
+
+def _clear_along(lobes: list[LobeState], j: int, seg: np.ndarray, centre: np.ndarray, order: np.ndarray,
+                 counts: np.ndarray, tol: float, box: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """The indices i, ascending, of the routes ``_along_route(seg, centre, order[i], counts[i])`` that ``foreign``
+    finds clear against ``box``: all tested in one compiled call (``clear.first_clear_along``), any resampled to
+    nothing and those after it one ``foreign`` call each (as before session 28)."""
+    ok = np.zeros(len(order), bool)
+    _, resume = first_clear_along(lobes, j, seg, centre, order, counts, tol, box, clear=ok)
+    for i in range(max(resume, 0), len(order) if resume >= 0 else 0):
+        ok[i] = not foreign(lobes, j, _along_route(seg, centre, order[i], counts[i]), tol, box)
+    return np.flatnonzero(ok)
 
 
 FREE_REACH = (0.025, 0.05, 0.1)
@@ -264,10 +297,12 @@ def _via(seg: np.ndarray, v: int, waypoint: np.ndarray, end: np.ndarray | None) 
 
 
 def _clear_prefix(lobes: list[LobeState], j: int, seg: np.ndarray, tol: float, box) -> int:
-    """How many of ``seg``'s first vertices stay out of every lobe but ``j``."""
-    ok = 0
-    while ok < len(seg) and not foreign(lobes, j, seg[: ok + 1], tol, box):
-        ok += 1
+    """How many of ``seg``'s first vertices stay out of every lobe but ``j`` (each prefix tested in turn up to the
+    first that does not, in one compiled call: ``clear.clear_prefix_length``)."""
+    ok, resume = clear_prefix_length(lobes, j, seg, tol, box)
+    if resume >= 0:  # a prefix resampled to nothing: the rest one ``foreign`` call each, as before session 28
+        while ok < len(seg) and not foreign(lobes, j, seg[: ok + 1], tol, box):
+            ok += 1
     return ok
 
 
@@ -311,11 +346,34 @@ def _along_routes(branch: tuple[np.ndarray, int, int], centre: np.ndarray) -> li
 def _along_route_iter(branch: tuple[np.ndarray, int, int], centre: np.ndarray) -> Iterator[np.ndarray]:
     """``_along_routes`` one by one, shortest first."""
     seg = np.asarray(branch[0], np.float64)
+    for v, m in zip(*_along_order(seg, centre)):
+        yield _along_route(seg, centre, v, m)
+
+
+def _along_route(seg: np.ndarray, centre: np.ndarray, v: int, m: int) -> np.ndarray:
+    """``seg`` (float64) up to its vertex ``v``, then ``m`` points evenly from ``seg[v]`` to ``centre``."""
+    return np.vstack([seg[:v], seg[v] + unit_steps(m) * (centre - seg[v])])
+
+
+CEIL_MARGIN = 1e-6
+"""``_along_order`` computes a count again with ``np.linalg.norm`` when gap / 1 cm lies this close (relative) to
+an integer: its vectorised root of the summed squares differs from ``np.linalg.norm``'s by a few ulps at most."""
+
+
+def _along_order(seg: np.ndarray, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(order, counts): ``seg``'s (float64) vertices v in the order ``_along_routes`` makes their routes (shortest
+    first), and each route's points from v to ``centre``, max(2, ceil(|centre - v| / 1 cm) + 1), as
+    ``np.linalg.norm`` of each gap gives them (the gaps are the distances the order is made of, computed again
+    one by one where the rounding could move the ceiling)."""
     if len(seg) == 0:
-        return
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(seg, axis=0), axis=1))])
-    length = arc + np.linalg.norm(seg - centre, axis=1)
-    for v in np.argsort(length, kind="stable"):
-        gap = float(np.linalg.norm(centre - seg[v]))
-        m = max(2, int(np.ceil(gap / 0.01)) + 1)
-        yield np.vstack([seg[:v], seg[v] + unit_steps(m) * (centre - seg[v])])
+    dist = np.linalg.norm(seg - centre, axis=1)
+    order = np.argsort(arc + dist, kind="stable")
+    x = dist[order] / 0.01
+    for i in np.flatnonzero(np.abs(x - np.rint(x)) <= CEIL_MARGIN * (1.0 + x)):
+        x[i] = float(np.linalg.norm(centre - seg[order[i]])) / 0.01
+    x = np.ceil(x)
+    if not np.isfinite(x).all():  # int() raises on it, as it did route by route
+        return order, np.array([max(2, int(c) + 1) for c in x], np.int64)
+    return order, np.maximum(2, x.astype(np.int64) + 1)
