@@ -254,6 +254,16 @@ def test_workers_start_without_a_trim_threshold_left_in_the_parent(monkeypatch):
     assert "MALLOC_TRIM_THRESHOLD_" not in env and os.environ["MALLOC_TRIM_THRESHOLD_"] == "65536"
 
 
+def stubbed_pole(n: int, seed: int = 0) -> np.ndarray:
+    """A pole 5 m tall and 1 cm thick with three 0.25 m stubs holding 3 % of the points each: it is let
+    through (a pole alone is refused since session 28) and gets the straight-line note (width ratio 0.023)."""
+    rng = np.random.default_rng(seed)
+    pole = np.c_[rng.normal(0, 0.01, (n, 2)), rng.uniform(0, 5, n)]
+    d = rng.uniform(0, 0.25, (3, n // 30))
+    return np.vstack([pole, *(np.c_[r * np.cos(a), r * np.sin(a), z + 0.5 * r]
+                              for r, a, z in zip(d, (0, 2.1, 4.2), (2, 3, 4)))])
+
+
 def test_a_scan_with_notes_carries_them_into_the_report(tmp_path):
     # a pole decomposes (its branches lie along it) but gets a note, which a library build of thousands
     # of scans dropped: the record, report.json, report.md and the command's text now carry it
@@ -263,9 +273,8 @@ def test_a_scan_with_notes_carries_them_into_the_report(tmp_path):
     from arboretum_server.batch.report import as_dict
     from arboretum_server.batch.tasks import decompose_scan
 
-    rng = np.random.default_rng(0)
     pole = tmp_path / "pole.xyz"
-    write_points(pole, np.c_[rng.normal(0, 0.01, (3000, 2)), rng.uniform(0, 5, 3000)])
+    write_points(pole, stubbed_pole(3000))  # a pole alone is refused (session 28): this one has three stubs
     out = decompose_scan(str(pole), file_sha256(pole), {"points": POINTS})
     assert out.error == "" and [n for n in out.notes if n.startswith("the cloud is nearly a straight line")]
     record = ScanRecord(str(pole), "unknown")

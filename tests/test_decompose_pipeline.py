@@ -520,17 +520,26 @@ def test_a_cloud_of_foliage_only_gets_a_note(tmp_path, capsys):
     assert f"note: {share:.1%} of the points are foliage" in capsys.readouterr().out and share < 0.9995
 
 
+def stubbed_pole(n: int, seed: int = 0) -> np.ndarray:
+    """A pole 5 m tall and 1 cm thick with three 0.25 m stubs holding 3 % of the points each: it is let
+    through (a pole alone is refused since session 28) and gets the straight-line note (width ratio 0.023)."""
+    rng = np.random.default_rng(seed)
+    pole = np.c_[rng.normal(0, 0.01, (n, 2)), rng.uniform(0, 5, n)]
+    d = rng.uniform(0, 0.25, (3, n // 30))
+    return np.vstack([pole, *(np.c_[r * np.cos(a), r * np.sin(a), z + 0.5 * r]
+                              for r, a, z in zip(d, (0, 2.1, 4.2), (2, 3, 4)))])
+
+
 def test_a_straight_line_gets_a_note(tmp_path, capsys):
-    # a pole 5 m tall and 1 cm thick has a trunk base and decomposes (its branches lie along it), which
-    # it did without a word
+    # a pole 5 m tall and 1 cm thick with three short stubs has a trunk base and decomposes (its branches
+    # lie along it), which it did without a word
     from arboretum_library.cli import main
 
-    rng = np.random.default_rng(0)
     pole = tmp_path / "pole.xyz"
-    np.savetxt(pole, np.c_[rng.normal(0, 0.01, (6000, 2)), rng.uniform(0, 5, 6000)])
+    np.savetxt(pole, stubbed_pole(6000))  # a pole alone is refused (session 28): this one has three stubs
     assert main(["decompose", str(pole), "--up", "z", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
-    assert data["stats"]["width_ratio"] < 0.01
+    assert data["stats"]["width_ratio"] < 0.03
     assert [n for n in data["notes"] if n.startswith("the cloud is nearly a straight line")]
 
 

@@ -233,14 +233,23 @@ def test_warm_up_imports_what_inline_handlers_need():
     assert out.stdout.split() == ["False", "True", "True"], out.stderr
 
 
+def stubbed_pole(n: int, seed: int = 0) -> np.ndarray:
+    """A pole 5 m tall and 1 cm thick with three 0.25 m stubs holding 3 % of the points each: it is let
+    through (a pole alone is refused since session 28) and gets the straight-line note (width ratio 0.023)."""
+    rng = np.random.default_rng(seed)
+    pole = np.c_[rng.normal(0, 0.01, (n, 2)), rng.uniform(0, 5, n)]
+    d = rng.uniform(0, 0.25, (3, n // 30))
+    return np.vstack([pole, *(np.c_[r * np.cos(a), r * np.sin(a), z + 0.5 * r]
+                              for r, a, z in zip(d, (0, 2.1, 4.2), (2, 3, 4)))])
+
+
 def test_an_imported_scan_brings_its_notes_over_the_wire(tmp_path):
     # library.import returned ids and counts only: a client never heard that its scan was a pole, held
     # a second trunk or was all foliage. The reply now carries the command's notes, and survives the wire
     from arboretum_library.protocol_base import parse, to_frames
     from arboretum_server.service.handlers.library import _jsonable, import_job
 
-    rng = np.random.default_rng(0)
-    pole = np.c_[rng.normal(0, 0.01, (3000, 2)), rng.uniform(0, 5, 3000)]
+    pole = stubbed_pole(3000)  # a pole alone is refused (session 28): this one has three stubs
     Library.open(tmp_path / "lib", create=True).close()  # import_scan makes it (ctx.library()) before the job
     result = import_job(lambda *a: None, str(tmp_path / "lib"), pole, None, "pole", "unknown", {"points": 2000})
     assert len(result["ids"]) >= 1 and [n for n in result["notes"] if "nearly a straight line" in n]

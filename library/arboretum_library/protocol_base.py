@@ -216,9 +216,42 @@ def from_message(m: Message) -> Msg:
         elif f.name in m.body:
             kwargs[f.name] = m.body[f.name]
     missing = [f.name for f in dataclasses.fields(cls) if f.name not in kwargs and _required(f)]
-    if missing:
-        raise ProtocolError(f"{m.type}: missing field(s) {', '.join(missing)}")
+    extra = undeclared(cls, m) if issubclass(cls, Request) else ""
+    if missing or extra:
+        said = [f"missing field(s) {', '.join(missing)}"] if missing else []
+        raise ProtocolError(f"{m.type}: " + "; ".join(said + ([extra] if extra else [])))
     return cls(**kwargs)
+
+
+MAX_NAMED = 8
+"""Names an undeclared-field error lists at most (a hostile request may send thousands)."""
+
+
+def undeclared(cls: type, m: Message) -> str:
+    """What of ``m``'s body and arrays a request of type ``cls`` does not declare, said with what it
+    takes; "" when nothing. A body key that is no field (``specie``), an array frame that is no array
+    field (``point``), or a record array (``FIELD/PATH``) without its record's ``FIELD`` in the body
+    would be dropped without a word: the request would run with the default instead (a client's
+    misspelt field). Header keys stay ignored (``wire``: the envelope takes optional keys)."""
+    fields = dataclasses.fields(cls)
+    hints = _hints(cls)
+    takes_arrays = [f.name for f in fields if "dtype" in f.metadata]
+    takes_body = [f.name for f in fields if "dtype" not in f.metadata]
+    records = {f.name for f in fields if hints[f.name] in RECORDS and f.name in m.body}
+    body = [k for k in m.body if k not in takes_body]
+    arrays = [k for k in m.arrays if k not in takes_arrays and k.split("/", 1)[0] not in records]
+    if not body and not arrays:
+        return ""
+    said = ([f"undeclared body field(s) {_names(body)}"] if body else []) + (
+        [f"undeclared array(s) {_names(arrays)}"] if arrays else [])
+    return (f"{'; '.join(said)} (a misspelt field?); {m.type} takes body fields {', '.join(takes_body) or 'none'} "
+            f"and arrays {', '.join(takes_arrays) or 'none'}")
+
+
+def _names(names: list[str]) -> str:
+    """Up to ``MAX_NAMED`` of ``names``, quoted and cut to 40 characters each, then how many in all."""
+    shown = ", ".join(repr(n[:40] + ("..." if len(n) > 40 else "")) for n in names[:MAX_NAMED])
+    return shown + (f", ... ({len(names)} in all)" if len(names) > MAX_NAMED else "")
 
 
 def _required(f: dataclasses.Field) -> bool:
@@ -281,6 +314,10 @@ def describe() -> str:
         "whose reply was dropped from the cache is answered `error`/`duplicate`, never run again. Peers",
         "ignore header keys they do not know, so this needs no new version. REQ sockets work too: the",
         "server strips their empty delimiter frame and puts it back on the reply.", "",
+        "A request's body fields and arrays are its type's fields below, nothing else: a body key or an",
+        "array frame the type does not declare (a misspelt `label`, an array under a record field that is",
+        "not in the body) is answered `error`/`protocol` naming it and what the type takes, never dropped.",
+        "Replies and events are read leniently: a client ignores body fields and arrays it does not know.", "",
     ]
     for name, cls in sorted(REGISTRY.items()):
         kind = "request" if issubclass(cls, Request) else "reply" if issubclass(cls, Reply) else "event"

@@ -52,9 +52,9 @@ def refusal(message: str, coarse: str | None, error: Exception | None = None, do
     UTM coordinates sits on a 0.5 m grid and is refused as "2 separate trunks" or "no trunk base", which
     names the symptom, not the cause. ``doubt`` (``upside_down_doubt``) likewise: a tree read upside
     down has no trunk base."""
-    from .preprocess import OptionError
+    from .preprocess import OptionError, PoleError
 
-    if isinstance(error, OptionError):
+    if isinstance(error, (OptionError, PoleError)):
         return message
     said = [message] + ([f"the file's precision may be why: {coarse}"] if coarse else []) + ([doubt] if doubt else [])
     return "; ".join(said)
