@@ -28,15 +28,13 @@ from arboretum_library import signals
 
 from .graph import query_threads
 from .tetloops import boundary as _boundary
-from .tetloops import circumspheres as _circumspheres  # noqa: F401 - the session-15 tests patch it here
-from .tetloops import cut as _cut
+from .tetloops import circumspheres as _circumspheres
+from .tetloops import covered as _covered
 from .tetloops import drop_edges as _drop_edges
-from .tetloops import finish as _finish
+from .tetloops import flat as _flat
 from .tetloops import held as _held
 from .tetloops import is_closed_manifold as is_closed_manifold
-from .tetloops import pinched_edges as _pinched
-from .tetloops import plain_shape as _plain_shape
-from .tetloops import tetrahedra as _tetrahedra
+from .tetloops import orient as _orient
 
 MIN_COVER = 0.95
 """Smallest fraction of a cluster's points the alpha shape must touch; otherwise the convex hull."""
@@ -100,8 +98,10 @@ class Tetrahedra:
         except QhullError:
             return
         self.tets, self.neighbours = dt.simplices, dt.neighbors
-        # a flat one's radius is inf: a rounding-sized volume gives any radius at all
-        self.centres, self.radii, self.flat = _tetrahedra(self.points, self.tets, FLAT)
+        corners = self.points[self.tets]
+        self.centres, self.radii = _circumspheres(corners)
+        self.flat = _flat(corners, FLAT)
+        self.radii[self.flat] = np.inf  # a rounding-sized volume gives any radius at all
 
     def without(self, blockers: np.ndarray | None, reach: float = np.inf) -> Tetrahedra:
         """The tetrahedra that stay when ``blockers`` (B, 3) join the tetrahedralisation and every
@@ -118,43 +118,31 @@ class Tetrahedra:
         live = np.flatnonzero(self.radii < reach)
         held = _held(self.centres[live], self.radii[live], blockers)
         unsure = live[held == 2]
+        near = cKDTree(blockers).query(self.centres[unsure], distance_upper_bound=reach)[0]
         out.radii = self.radii.copy()
         out.radii[live[held == 1]] = np.inf
-        if len(unsure):  # the KD-tree only for spheres a blocker grazes (none in most carvings)
-            near = cKDTree(blockers).query(self.centres[unsure], distance_upper_bound=reach)[0]
-            out.radii[unsure[near < self.radii[unsure]]] = np.inf
+        out.radii[unsure[near < self.radii[unsure]]] = np.inf
         return out
 
 
     def shape(self, radius: float) -> tuple[np.ndarray, np.ndarray] | None:
         """The alpha shape at probe radius ``radius``, as ``alpha_shape`` returns it (flat tetrahedra
         walled in by kept ones filled, ``_walled_in``)."""
-        got = self.leveled_shape(radius)
-        return None if got is None else got[:2]
-
-    def leveled_shape(self, radius: float) -> tuple[np.ndarray, np.ndarray, int] | None:
-        """``shape`` with its ``tetloops._manifold_level`` (0 open, 1 closed, 2 closed and one piece: what
-        ``is_closed_manifold`` answers with and without ``one_piece``), found in the same compiled call.
-        Uncarved, the whole shape is one call (``tetloops.plain_shape``: session 28, a split's 10-point
-        pieces spent more in the calls between the loops than in them)."""
-        if not len(self.tets):
-            return None
-        least = MIN_COVER * self.n_own
-        if not self.carve:
-            return _plain_shape(self.points, self.tets, self.neighbours, self.flat, self.radii, radius, least)
-        keep = _cut(self.neighbours, self.flat, self.radii, radius)
+        keep = _walled_in(self.neighbours, self.flat, self.radii < radius)
         if not keep.any():
             return None
         faces, opp = _boundary(self.tets, self.neighbours, keep)
-        for _ in range(PINCH_ROUNDS):
-            pinched = _pinched(faces)
+        for _ in range(PINCH_ROUNDS if self.carve else 0):
+            pinched = _pinched_edges(faces)
             if not len(pinched):
                 break
             _drop_edges(self.tets, keep, pinched)
             if not keep.any():
-                return None
+                break
             faces, opp = _boundary(self.tets, self.neighbours, keep)
-        return _finish(self.points, self.tets, keep, faces, opp, least)
+        if not keep.any() or _covered(self.tets, keep, len(self.points)) < MIN_COVER * self.n_own:
+            return None
+        return _compact(self.points, _orient(self.points, faces, opp))
 
 
 def _walled_in(neighbours: np.ndarray, flat: np.ndarray, keep: np.ndarray) -> np.ndarray:
@@ -216,8 +204,7 @@ def _edge_keys(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _pinched_edges(faces: np.ndarray) -> np.ndarray:
-    """Keys of the edges that border more than two of ``faces`` (F, 3) (the numpy reference of
-    ``tetloops.pinched_edges``, which the carved shapes use)."""
+    """Keys of the edges that border more than two of ``faces`` (F, 3)."""
     keys = np.concatenate([_edge_keys(faces[:, i], faces[:, (i + 1) % 3]) for i in range(3)])
     u, cnt = np.unique(keys, return_counts=True)
     return u[cnt > 2]
@@ -273,8 +260,8 @@ def plain_hull(points: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarra
     ``plain_steps`` would compute again, and the tetrahedralisation (for ``carved_hull``)."""
     tet = Tetrahedra(points, radius / THIN)
     for i, step in enumerate(RADIUS_STEPS):
-        shape = tet.leveled_shape(radius * step)
-        if shape is not None and shape[2] == 2:
+        shape = tet.shape(radius * step)
+        if shape is not None and is_closed_manifold(shape[1]):
             return shape[0], shape[1], True, RADIUS_STEPS[: i + 1], tet
     v, f = convex_hull(points)
     return v, f, False, RADIUS_STEPS, tet
@@ -351,10 +338,10 @@ def carved_hull(points: np.ndarray, radius: float, blockers: np.ndarray | None,
     tet = (tet if tet is not None else Tetrahedra(points, radius / THIN)).without(blockers, reach)
     shapes = []
     for step in steps:
-        shapes.append(tet.leveled_shape(radius * step))
-        if shapes[-1] is not None and shapes[-1][2] == 2:
-            return shapes[-1][:2]
-    closed = [s[:2] for s in shapes if pieces and s is not None and s[2] >= 1]
+        shapes.append(tet.shape(radius * step))
+        if shapes[-1] is not None and is_closed_manifold(shapes[-1][1]):
+            return shapes[-1]
+    closed = [s for s in shapes if pieces and s is not None and is_closed_manifold(s[1], one_piece=False)]
     return closed[0] if closed else None
 
 

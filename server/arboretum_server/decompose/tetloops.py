@@ -91,51 +91,6 @@ def _flat_kernel(p: np.ndarray, tol: float, out: np.ndarray) -> None:  # pragma:
         out[t] = not six > tol * longest * np.sqrt(longest)
 
 
-def tetrahedra(points: np.ndarray, tets: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(centres (T, 3), radii (T,), flat (T,) bool) of the tetrahedra ``tets`` (T, 4) of ``points`` (N, 3):
-    ``circumspheres(points[tets])`` and ``flat(points[tets], tol)`` with every flat one's radius set to inf
-    (what ``lobes.Tetrahedra`` keeps), in one compiled loop that reads the corners through ``tets`` (session
-    28: the gathered (T, 4, 3) corners and three calls took a fifth of a 10-point piece's tetrahedralisation
-    after qhull). The same float operations as those two loops, so the same bits."""
-    return _tetrahedra_kernel(np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(tets), tol)
-
-
-@njit(cache=True, nogil=True)
-def _tetrahedra_kernel(pts, tets, tol):  # pragma: no cover - numba
-    """``_circumspheres_kernel`` and ``_flat_kernel`` on corner ``i`` = ``pts[tets[t, i]]``, flat ones' radii inf."""
-    n = tets.shape[0]
-    centre, r, out = np.full((n, 3), np.nan), np.full(n, np.inf), np.zeros(n, np.bool_)
-    for t in range(n):
-        i0, i1, i2, i3 = tets[t, 0], tets[t, 1], tets[t, 2], tets[t, 3]
-        a0, a1, a2 = pts[i1, 0] - pts[i0, 0], pts[i1, 1] - pts[i0, 1], pts[i1, 2] - pts[i0, 2]
-        b0, b1, b2 = pts[i2, 0] - pts[i0, 0], pts[i2, 1] - pts[i0, 1], pts[i2, 2] - pts[i0, 2]
-        c0, c1, c2 = pts[i3, 0] - pts[i0, 0], pts[i3, 1] - pts[i0, 1], pts[i3, 2] - pts[i0, 2]
-        bc0, bc1, bc2 = b1 * c2 - b2 * c1, b2 * c0 - b0 * c2, b0 * c1 - b1 * c0
-        ca0, ca1, ca2 = c1 * a2 - c2 * a1, c2 * a0 - c0 * a2, c0 * a1 - c1 * a0
-        ab0, ab1, ab2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
-        det = 2.0 * (a0 * bc0 + a1 * bc1 + a2 * bc2)
-        if abs(det) > 1e-18:
-            la, lb, lc = a0 * a0 + a1 * a1 + a2 * a2, b0 * b0 + b1 * b1 + b2 * b2, c0 * c0 + c1 * c1 + c2 * c2
-            n0 = la * bc0 + lb * ca0 + lc * ab0
-            n1 = la * bc1 + lb * ca1 + lc * ab1
-            n2 = la * bc2 + lb * ca2 + lc * ab2
-            r[t] = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2) / abs(det)
-            centre[t, 0] = pts[i0, 0] + n0 / det
-            centre[t, 1] = pts[i0, 1] + n1 / det
-            centre[t, 2] = pts[i0, 2] + n2 / det
-        longest = 0.0
-        for i in range(4):
-            for j in range(i + 1, 4):
-                u, v = tets[t, i], tets[t, j]
-                d0, d1, d2 = pts[v, 0] - pts[u, 0], pts[v, 1] - pts[u, 1], pts[v, 2] - pts[u, 2]
-                longest = max(longest, d0 * d0 + d1 * d1 + d2 * d2)
-        six = abs(a0 * (b1 * c2 - b2 * c1) + a1 * (b2 * c0 - b0 * c2) + a2 * (b0 * c1 - b1 * c0))
-        out[t] = not six > tol * longest * np.sqrt(longest)
-        if out[t]:
-            r[t] = np.inf
-    return centre, r, out
-
-
 HELD_CELLS = 12
 """``held`` buckets the blockers in a grid of at most this many cells along their box's longest side."""
 HELD_MARGIN = 1e-9
@@ -283,28 +238,19 @@ def is_closed_manifold_reference(faces: np.ndarray, one_piece: bool = True) -> b
 
 @njit(cache=True, nogil=True)
 def _closed_kernel(faces: np.ndarray, n: int, one_piece: bool) -> bool:  # pragma: no cover - numba
-    level = _manifold_level(faces, n, one_piece)
-    return level == 2 if one_piece else level >= 1
-
-
-@njit(cache=True, nogil=True)
-def _manifold_level(faces: np.ndarray, n: int, one_piece: bool) -> int:  # pragma: no cover - numba
-    """0: some edge of ``faces`` (F, 3; vertex indices < ``n``) does not border exactly two of them; 1: every
-    edge does (and, when ``one_piece``, they form several pieces); 2: every edge does and they form one piece
-    (only asked when ``one_piece``)."""
     keys = np.zeros(3 * faces.shape[0], np.int64)
     for t in range(faces.shape[0]):
         for k in range(3):
-            u, v = np.int64(faces[t, k]), np.int64(faces[t, (k + 1) % 3])
+            u, v = faces[t, k], faces[t, (k + 1) % 3]
             keys[3 * t + k] = min(u, v) * n + max(u, v)
     keys.sort()
     i = 0
     while i < len(keys):  # every key exactly twice
         if i + 1 >= len(keys) or keys[i + 1] != keys[i] or (i + 2 < len(keys) and keys[i + 2] == keys[i]):
-            return 0
+            return False
         i += 2
     if not one_piece:
-        return 1
+        return True
     root = np.arange(n)
     pieces = n
     for i in range(0, len(keys), 2):
@@ -318,7 +264,7 @@ def _manifold_level(faces: np.ndarray, n: int, one_piece: bool) -> int:  # pragm
         if u != v:
             root[u] = v
             pieces -= 1
-    return 2 if pieces == 1 else 1
+    return pieces == 1
 
 
 def covered(tets: np.ndarray, keep: np.ndarray, n: int) -> int:
@@ -412,144 +358,6 @@ def _drop_kernel(tets, keep, edges):  # pragma: no cover - numba
                 break
 
 
-def cut(neighbours: np.ndarray, flat: np.ndarray, radii: np.ndarray, radius: float) -> np.ndarray:
-    """(T,) bool: the tetrahedra whose circumradius (``radii`` (T,)) is below ``radius``, with the ``flat`` (T,)
-    ones walled in by them added (``lobes._walled_in(neighbours, flat, radii < radius)``, its numpy reference:
-    the same rounds, each deciding on the state before it)."""
-    keep = np.zeros(len(radii), np.bool_)
-    _cut_kernel(np.ascontiguousarray(neighbours), np.ascontiguousarray(flat, dtype=np.bool_),
-                np.ascontiguousarray(radii, dtype=np.float64), radius, keep)
-    return keep
-
-
-@njit(cache=True, nogil=True)
-def _cut_kernel(neighbours, flat, radii, radius, keep):  # pragma: no cover - numba
-    n = radii.shape[0]
-    fill = np.zeros(n, np.bool_)
-    todo = np.zeros(n, np.int64)
-    walled = np.zeros(n, np.bool_)
-    m = 0
-    for t in range(n):
-        keep[t] = radii[t] < radius
-        if flat[t] and not keep[t]:
-            fill[t] = True
-            todo[m] = t
-            m += 1
-    while m:
-        every = True
-        for i in range(m):  # decided on this round's fill alone, as numpy's vector test does
-            t = todo[i]
-            w = True
-            for k in range(4):
-                nb = neighbours[t, k]
-                if nb < 0 or not (keep[nb] or fill[nb]):
-                    w = False
-                    break
-            walled[i] = w
-            every = every and w
-        if every:
-            break
-        left = 0
-        for i in range(m):
-            if walled[i]:
-                todo[left] = todo[i]
-                left += 1
-            else:
-                fill[todo[i]] = False
-        m = left
-    for t in range(n):
-        keep[t] = keep[t] or fill[t]
-
-
-def finish(points: np.ndarray, tets: np.ndarray, keep: np.ndarray, faces: np.ndarray, opp: np.ndarray,
-           least: float) -> tuple[np.ndarray, np.ndarray, int] | None:
-    """The end of ``lobes.Tetrahedra.shape`` for the kept ``tets`` and their boundary ``faces`` / ``opp``
-    (``boundary``): None when fewer than ``least`` points are covered (``covered``); else the faces oriented
-    (``orient``) and compacted (vertices, int32 faces: ``lobes._compact``) and their ``_manifold_level``
-    (0 open, 1 closed, 2 closed and one piece; ``is_closed_manifold``'s answers), in one compiled call."""
-    ok, v, f, level = _finish_kernel(np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(tets),
-                                     np.ascontiguousarray(keep, dtype=np.bool_), np.ascontiguousarray(faces),
-                                     np.ascontiguousarray(opp), least)
-    return (v, f, int(level)) if ok else None
-
-
-@njit(cache=True, nogil=True)
-def _finish_kernel(points, tets, keep, faces, opp, least):  # pragma: no cover - numba
-    if _covered_kernel(tets, keep, points.shape[0]) < least:
-        return False, np.zeros((0, 3)), np.zeros((0, 3), np.int32), 0
-    out = faces.copy()
-    _orient_kernel(points, out, opp)
-    mark = np.zeros(points.shape[0], np.bool_)
-    for i in range(out.shape[0]):
-        for c in range(3):
-            mark[out[i, c]] = True
-    rank = np.zeros(points.shape[0], np.int64)
-    used = 0
-    for i in range(points.shape[0]):
-        rank[i] = used
-        if mark[i]:
-            used += 1
-    verts = np.zeros((used, 3))
-    for i in range(points.shape[0]):
-        if mark[i]:
-            for c in range(3):
-                verts[rank[i], c] = points[i, c]
-    f = np.zeros((out.shape[0], 3), np.int32)
-    for i in range(out.shape[0]):
-        for c in range(3):
-            f[i, c] = rank[out[i, c]]
-    level = _manifold_level(f, used, True) if f.shape[0] >= 4 else 0
-    return True, verts, f, level
-
-
-def plain_shape(points: np.ndarray, tets: np.ndarray, neighbours: np.ndarray, flat: np.ndarray, radii: np.ndarray,
-                radius: float, least: float) -> tuple[np.ndarray, np.ndarray, int] | None:
-    """``finish`` of the ``boundary`` of ``cut``, None when nothing is kept: an uncarved alpha shape
-    (``lobes.Tetrahedra.shape`` without pinch rounds) in one compiled call."""
-    ok, v, f, level = _plain_shape_kernel(np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(tets),
-                                          np.ascontiguousarray(neighbours), np.ascontiguousarray(flat, dtype=np.bool_),
-                                          np.ascontiguousarray(radii, dtype=np.float64), radius, least)
-    return (v, f, int(level)) if ok else None
-
-
-@njit(cache=True, nogil=True)
-def _plain_shape_kernel(points, tets, neighbours, flat, radii, radius, least):  # pragma: no cover - numba
-    keep = np.zeros(radii.shape[0], np.bool_)
-    _cut_kernel(neighbours, flat, radii, radius, keep)
-    if not keep.any():
-        return False, np.zeros((0, 3)), np.zeros((0, 3), np.int32), 0
-    faces, opp = _boundary_kernel(tets, neighbours, keep)
-    return _finish_kernel(points, tets, keep, faces, opp, least)
-
-
-def pinched_edges(faces: np.ndarray) -> np.ndarray:
-    """Sorted keys ``lo * 2**32 + hi`` (int64) of the edges that border more than two of ``faces`` (F, 3): the
-    array ``lobes._pinched_edges`` (its numpy reference, ``np.unique`` of the keys) gives, in one compiled call."""
-    return _pinched_kernel(np.ascontiguousarray(faces))
-
-
-@njit(cache=True, nogil=True)
-def _pinched_kernel(faces):  # pragma: no cover - numba
-    keys = np.zeros(3 * faces.shape[0], np.int64)
-    for t in range(faces.shape[0]):
-        for k in range(3):
-            a, b = np.int64(faces[t, k]), np.int64(faces[t, (k + 1) % 3])
-            keys[3 * t + k] = min(a, b) * (np.int64(1) << 32) + max(a, b)
-    keys.sort()
-    out = np.zeros(len(keys), np.int64)
-    m = 0
-    i = 0
-    while i < len(keys):
-        j = i
-        while j < len(keys) and keys[j] == keys[i]:
-            j += 1
-        if j - i > 2:
-            out[m] = keys[i]
-            m += 1
-        i = j
-    return out[:m].copy()
-
-
 def warm() -> None:
     """Run every loop here once on a tiny input of the dtypes the alpha shapes use (scipy's int32
     simplices), so numba loads or compiles them now: the service calls it when it starts
@@ -564,12 +372,3 @@ def warm() -> None:
     covered(tet, keep, 4)
     orient(p[0], tet[:, :3], tet[:, 3])
     drop_edges(tet, keep, np.array([1], np.int64))
-    tetrahedra(p[0], tet, 1e-10)
-    nb = np.full((1, 4), -1, np.int32)
-    cut(nb, np.zeros(1, bool), r, 2.0)
-    finish(p[0], tet, keep, tet[:, :3], tet[:, 3], 1.0)
-    plain_shape(p[0], tet, nb, np.zeros(1, bool), r, 2.0, 1.0)
-    pinched_edges(tet[:, :3])
-    closed = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
-    for faces in (closed, closed.astype(np.int32)):  # called inside the loops above, and once itself here
-        _manifold_level(faces, 4, True)
