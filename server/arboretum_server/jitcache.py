@@ -3,9 +3,9 @@
 numba checks a cached kernel against its own file only: a kernel that calls a kernel of another file, or
 reads a constant from one, keeps running the old code after that file changed (numba's documented cache
 limitation). An edited checkout or an updated editable install then gives results of no version of the
-code, silently (session 28: three guiding-scanner decompositions hashed differently until the caches were
-deleted). So the cache lives in a folder named by a digest of every source file of the package that uses
-numba: a change to any of them starts from an empty folder, and the older folders are pruned.
+code, silently (tests/test_jitcache_s28.py shows it: an edited callee, the caller's old answer). So the
+cache lives in a folder named by a digest of every source file of the package that uses numba: a change
+to any of them starts from an empty folder, and the older folders are pruned.
 """
 
 from __future__ import annotations
