@@ -416,3 +416,13 @@ def real_scan(key: str) -> tuple[np.ndarray, np.ndarray]:
     scans = Path(__file__).resolve().parents[1] / "assets" / "scans"
     pts = np.loadtxt(next(scans.glob(f"*/{key}*.xyz")))[:, :3]
     return pts, prepared_root(pts)
+
+
+def stubbed_pole(n: int, seed: int = 0) -> np.ndarray:
+    """A pole 5 m tall and 1 cm thick with three 0.25 m stubs holding 3 % of the points each: it is let
+    through (a pole alone is refused since session 28) and gets the straight-line note (width ratio 0.023)."""
+    rng = np.random.default_rng(seed)
+    pole = np.c_[rng.normal(0, 0.01, (n, 2)), rng.uniform(0, 5, n)]
+    d = rng.uniform(0, 0.25, (3, n // 30))
+    return np.vstack([pole, *(np.c_[r * np.cos(a), r * np.sin(a), z + 0.5 * r]
+                              for r, a, z in zip(d, (0, 2.1, 4.2), (2, 3, 4)))])

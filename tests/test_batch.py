@@ -21,6 +21,7 @@ from arboretum_server.batch.report import _cell, write_report
 from arboretum_server.batch.synthetic import synthetic_scans
 from arboretum_server.batch.tasks import SCAN_EXAMPLES_KEY
 from arboretum_server.decompose.examples import file_sha256
+from factories import stubbed_pole
 
 POINTS = 1500
 OPTS = BuildOptions(workers=2, points=POINTS)
@@ -252,16 +253,6 @@ def test_workers_start_without_a_trim_threshold_left_in_the_parent(monkeypatch):
         env = next(iter(client.run(_worker_settings).values()))["env"]
         assert "MALLOC_TRIM_THRESHOLD_" not in os.environ
     assert "MALLOC_TRIM_THRESHOLD_" not in env and os.environ["MALLOC_TRIM_THRESHOLD_"] == "65536"
-
-
-def stubbed_pole(n: int, seed: int = 0) -> np.ndarray:
-    """A pole 5 m tall and 1 cm thick with three 0.25 m stubs holding 3 % of the points each: it is let
-    through (a pole alone is refused since session 28) and gets the straight-line note (width ratio 0.023)."""
-    rng = np.random.default_rng(seed)
-    pole = np.c_[rng.normal(0, 0.01, (n, 2)), rng.uniform(0, 5, n)]
-    d = rng.uniform(0, 0.25, (3, n // 30))
-    return np.vstack([pole, *(np.c_[r * np.cos(a), r * np.sin(a), z + 0.5 * r]
-                              for r, a, z in zip(d, (0, 2.1, 4.2), (2, 3, 4)))])
 
 
 def test_a_scan_with_notes_carries_them_into_the_report(tmp_path):

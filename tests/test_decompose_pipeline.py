@@ -22,6 +22,7 @@ from arboretum_server.decompose.examples import (
 from arboretum_server.decompose.options import DecomposeOptions
 from arboretum_server.decompose.pipeline import decompose
 from arboretum_server.decompose.toytree import toy_scan, toy_truth
+from factories import stubbed_pole
 
 N_M, N_L = 6, 20
 OPTS = DecomposeOptions(n_main=N_M, n_lobes=N_L)
@@ -518,16 +519,6 @@ def test_a_cloud_of_foliage_only_gets_a_note(tmp_path, capsys):
     assert main(["decompose", str(blob), "--up", "z"]) == 0  # the text output carries it too
     share = data["stats"]["leaf_points"] / data["stats"]["points"]
     assert f"note: {share:.1%} of the points are foliage" in capsys.readouterr().out and share < 0.9995
-
-
-def stubbed_pole(n: int, seed: int = 0) -> np.ndarray:
-    """A pole 5 m tall and 1 cm thick with three 0.25 m stubs holding 3 % of the points each: it is let
-    through (a pole alone is refused since session 28) and gets the straight-line note (width ratio 0.023)."""
-    rng = np.random.default_rng(seed)
-    pole = np.c_[rng.normal(0, 0.01, (n, 2)), rng.uniform(0, 5, n)]
-    d = rng.uniform(0, 0.25, (3, n // 30))
-    return np.vstack([pole, *(np.c_[r * np.cos(a), r * np.sin(a), z + 0.5 * r]
-                              for r, a, z in zip(d, (0, 2.1, 4.2), (2, 3, 4)))])
 
 
 def test_a_straight_line_gets_a_note(tmp_path, capsys):

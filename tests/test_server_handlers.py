@@ -13,7 +13,7 @@ from arboretum_library.store import Library
 from arboretum_server.service.context import Context
 from arboretum_server.service.dispatch import Dispatcher, load_handlers
 from arboretum_server.service.sessions import Sessions
-from factories import make_example
+from factories import make_example, stubbed_pole
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
@@ -231,16 +231,6 @@ def test_warm_up_imports_what_inline_handlers_need():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.stdout.split() == ["False", "True", "True"], out.stderr
-
-
-def stubbed_pole(n: int, seed: int = 0) -> np.ndarray:
-    """A pole 5 m tall and 1 cm thick with three 0.25 m stubs holding 3 % of the points each: it is let
-    through (a pole alone is refused since session 28) and gets the straight-line note (width ratio 0.023)."""
-    rng = np.random.default_rng(seed)
-    pole = np.c_[rng.normal(0, 0.01, (n, 2)), rng.uniform(0, 5, n)]
-    d = rng.uniform(0, 0.25, (3, n // 30))
-    return np.vstack([pole, *(np.c_[r * np.cos(a), r * np.sin(a), z + 0.5 * r]
-                              for r, a, z in zip(d, (0, 2.1, 4.2), (2, 3, 4)))])
 
 
 def test_an_imported_scan_brings_its_notes_over_the_wire(tmp_path):
