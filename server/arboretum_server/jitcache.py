@@ -6,14 +6,25 @@ limitation). An edited checkout or an updated editable install then gives result
 code, silently (tests/test_jitcache_s28.py shows it: an edited callee, the caller's old answer). So the
 cache lives in a folder named by a digest of every source file of the package that uses numba: a change
 to any of them starts from an empty folder, and the older folders are pruned.
+
+numba's cache is also unsafe between processes (session 29): a kernel's compiled versions (one per argument
+types: numba compiles ``f(x, 0)`` called from another kernel apart, for ``Literal[int](0)``) go to data files
+numbered in the order they were saved, the number chosen from the index the process read. Two processes
+compiling different versions at once (a batch build's workers, from an empty cache) both take number 1; the
+index can end up naming one version and the file holding the other, and every later process loads the wrong
+machine code for those arguments, silently (a shortest path heap run as if empty, an alpha shape judged
+open). ``njit`` here installs ``KeyedCacheFile``: a data file named by its key and holding it, written before
+the index names it, the index updated under a lock. Every kernel of the server is compiled through it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import shutil
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 PREFIX = "arboretum-"
@@ -25,11 +36,15 @@ KEEP = 3
 MARKER = b"numba"
 """A source file whose text holds this is part of the digest (it compiles kernels or imports them)."""
 
+SCHEME = b"keyed-data-files-1"
+"""Part of the digest: the layout of the files in a folder (``KeyedCacheFile``). Folders written by numba's own
+numbered layout before session 29 may hold a crossed version, so they are never read again."""
+
 
 def kernel_digest(package: Path) -> str:
-    """16 hex digits of SHA-256 over the relative path and content of every ``.py`` file under ``package``
+    """16 hex digits of SHA-256 over ``SCHEME`` and the relative path and content of every ``.py`` file under ``package``
     that mentions numba, in sorted order."""
-    h = hashlib.sha256()
+    h = hashlib.sha256(SCHEME + b"\0")
     for path in sorted(package.rglob("*.py")):
         data = path.read_bytes()
         if MARKER in data:
@@ -85,3 +100,77 @@ def use(package: Path) -> Path | None:
     if "numba" in sys.modules:
         sys.modules["numba"].config.CACHE_DIR = str(target)
     return target
+
+
+def key_tag(key: object) -> str:
+    """SHA-256 of a cache key's text (argument types, target machine, byte code): the same in every process."""
+    return hashlib.sha256(repr(key).encode()).hexdigest()
+
+
+@contextlib.contextmanager
+def _locked(path: str) -> Iterator[None]:
+    """An exclusive advisory lock on ``path`` (made if missing) while the block runs; no lock where ``fcntl`` is
+    missing (data files are still named by their key there, so a lost index entry costs a compile, never a
+    wrong kernel)."""
+    try:
+        import fcntl
+    except ImportError:  # Windows
+        yield
+        return
+    with open(path, "a+b") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+_INSTALLED: list[type] = []
+
+
+def install() -> type:
+    """Make numba's caches use ``KeyedCacheFile`` (once per process; numba reads the class name when a kernel
+    with ``cache=True`` is defined, so call this before). Returns the class."""
+    if _INSTALLED:
+        return _INSTALLED[0]
+    from numba.core import caching
+
+    class KeyedCacheFile(caching.IndexDataCacheFile):
+        """numba's index and data files, made safe for processes compiling at once: the data file of a version
+        is named by ``key_tag`` of its key and stores that tag; it is written whole (numba writes a temporary
+        file and renames it) before the index names it; the index is read, extended and written under a lock
+        beside it. A load whose file is missing, unreadable or holds another tag returns None: numba compiles."""
+
+        def _keyed_name(self, key: object) -> str:
+            return self._data_name_pattern.replace("{number:d}", "k" + key_tag(key)[:24])
+
+        def save(self, key: object, data: object) -> None:
+            name = self._keyed_name(key)
+            self._save_data(name, (key_tag(key), data))
+            with _locked(self._index_path + ".lock"):
+                overloads = self._load_index()
+                if overloads.get(key) != name:
+                    overloads[key] = name
+                    self._save_index(overloads)
+
+        def load(self, key: object) -> object | None:
+            name = self._load_index().get(key)
+            if name is None:
+                return None
+            try:
+                tag, data = self._load_data(name)
+            except (OSError, EOFError, ValueError, TypeError, caching.pickle.UnpicklingError):
+                return None
+            return data if tag == key_tag(key) else None
+
+    caching.IndexDataCacheFile = KeyedCacheFile  # numba.core.caching.Cache looks the name up per kernel
+    _INSTALLED.append(KeyedCacheFile)
+    return KeyedCacheFile
+
+
+def njit(*args, **kwargs):
+    """``numba.njit`` with ``KeyedCacheFile`` installed first: how every kernel of the server is compiled."""
+    import numba
+
+    install()
+    return numba.njit(*args, **kwargs)

@@ -18,12 +18,12 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra, minimum_spanning_tree
 from scipy.spatial import cKDTree
 
 from arboretum_library.signals import held
+from arboretum_server.jitcache import njit
 
 CANDIDATES = 16
 """Neighbours queried per point for bridging candidates (beyond the K graph neighbours)."""

@@ -8,7 +8,8 @@ compiled loop (``_query_kernel``; numpy's 27 rounds of searchsorted calls before
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from arboretum_server.jitcache import njit
 
 _OFFSETS = np.array(np.meshgrid([-1, 0, 1], [-1, 0, 1], [-1, 0, 1], indexing="ij")).reshape(3, -1).T
 _BIG = np.int64(1) << 20

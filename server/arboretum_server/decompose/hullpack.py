@@ -19,7 +19,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+
+from arboretum_server.jitcache import njit
 
 from .lobes import face_crossing
 from .merge import _resample_kernel

@@ -21,10 +21,10 @@ import signal
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-from numba import njit
 from scipy.spatial import ConvexHull, Delaunay, QhullError, cKDTree
 
 from arboretum_library import signals
+from arboretum_server.jitcache import njit
 
 from .graph import query_threads
 from .tetloops import boundary as _boundary

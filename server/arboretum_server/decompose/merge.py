@@ -20,10 +20,10 @@ import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 from scipy.spatial import cKDTree
 
 from arboretum_library.geometry import polyline_lengths
+from arboretum_server.jitcache import njit
 
 from .grid import BoxGrid
 from .memo import ArrayMemo

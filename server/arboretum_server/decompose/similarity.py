@@ -14,10 +14,10 @@ from __future__ import annotations
 import functools
 
 import numpy as np
-from numba import njit
 from scipy.optimize import linear_sum_assignment
 
 from arboretum_library.geometry import resample_polyline
+from arboretum_server.jitcache import njit
 
 R_INNER, R_OUTER = 0.125, 2.0
 

@@ -13,8 +13,9 @@ topology stays connected exactly. Eq. (1) (the joint) is applied before and kept
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 from scipy.spatial import cKDTree
+
+from arboretum_server.jitcache import njit
 
 from .memo import ArrayMemo
 from .merge import BranchSet, add_branch

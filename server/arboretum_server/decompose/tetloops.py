@@ -9,7 +9,8 @@ the rest of that change).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from arboretum_server.jitcache import njit
 
 
 def circumspheres(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -9,8 +9,9 @@ lazily: only an attraction point's current best pair is traced, and the next one
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 from scipy.spatial import cKDTree
+
+from arboretum_server.jitcache import njit
 
 from .crown import Crown
 from .trace import segments_stay_inside

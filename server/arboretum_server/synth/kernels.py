@@ -13,7 +13,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from arboretum_server.jitcache import njit
 
 PI = math.pi
 VERTICAL = 1e-9
