@@ -164,3 +164,21 @@ def test_keyed_kernels_load_back_in_another_process(tmp_path):
     assert (runs[0]["hits"], runs[1]["hits"]) == (0, 2)  # the second process compiles nothing
     files = [p.name for p in (tmp_path / "cache").rglob("kern.*.nbc")]
     assert len(files) == 3 and all(re.search(r"\.k[0-9a-f]{24}\.nbc$", n) for n in files)  # f twice, g once
+
+
+def test_an_unknown_numba_layout_is_left_alone():
+    from numba.core import caching
+
+    stock = jitcache.install().__mro__[1]
+    assert jitcache.layout_known(stock) and jitcache.layout_known(caching.IndexDataCacheFile)
+
+    class Renamed(stock):  # a numba that renamed its data-file pattern
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            self._data_name_pattern = kwargs["filename_base"] + "-{n}.nbc"
+
+    class Missing:  # a numba whose cache file has another interface
+        def __init__(self, cache_path, filename_base, source_stamp):
+            self._index_path = cache_path
+
+    assert not jitcache.layout_known(Renamed) and not jitcache.layout_known(Missing)

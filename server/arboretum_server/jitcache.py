@@ -125,15 +125,40 @@ def _locked(path: str) -> Iterator[None]:
             fcntl.flock(f, fcntl.LOCK_UN)
 
 
-_INSTALLED: list[type] = []
+_INSTALLED: list[type | None] = []
+
+NEEDED = ("_load_index", "_save_index", "_load_data", "_save_data")
+"""Methods of numba's ``IndexDataCacheFile`` that ``KeyedCacheFile`` builds on (numba 0.60-0.68)."""
 
 
-def install() -> type:
+def layout_known(cls: type) -> bool:
+    """Whether ``cls`` (numba's ``IndexDataCacheFile``) is the layout ``KeyedCacheFile`` was written against:
+    its methods ``NEEDED``, an index path and a numbered data-file pattern. A numba that changed them keeps
+    its own layout (a warning says so) rather than failing in every compile."""
+    try:
+        probe = cls(cache_path="", filename_base="probe", source_stamp=None)
+    except Exception:  # noqa: BLE001 - any change of the constructor means an unknown layout
+        return False
+    return (all(callable(getattr(cls, m, None)) for m in NEEDED) and isinstance(getattr(probe, "_index_path", None), str)
+            and "{number:d}" in str(getattr(probe, "_data_name_pattern", "")))
+
+
+def install() -> type | None:
     """Make numba's caches use ``KeyedCacheFile`` (once per process; numba reads the class name when a kernel
-    with ``cache=True`` is defined, so call this before). Returns the class."""
+    with ``cache=True`` is defined, so call this before). Returns the class; None when this numba's cache
+    files are not the layout it knows (``layout_known``)."""
     if _INSTALLED:
         return _INSTALLED[0]
     from numba.core import caching
+
+    if not layout_known(caching.IndexDataCacheFile):
+        import warnings
+
+        warnings.warn(f"numba {getattr(sys.modules.get('numba'), '__version__', '?')}: unknown cache-file layout; "
+                      "kernels saved by processes compiling at once may be crossed (see arboretum_server.jitcache)",
+                      RuntimeWarning, stacklevel=2)
+        _INSTALLED.append(None)
+        return None
 
     class KeyedCacheFile(caching.IndexDataCacheFile):
         """numba's index and data files, made safe for processes compiling at once: the data file of a version
