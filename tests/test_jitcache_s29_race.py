@@ -182,3 +182,21 @@ def test_an_unknown_numba_layout_is_left_alone():
             self._index_path = cache_path
 
     assert not jitcache.layout_known(Renamed) and not jitcache.layout_known(Missing)
+
+
+def test_a_folder_removed_or_an_index_damaged_costs_a_compile_not_a_failure(tmp_path):
+    keyed = jitcache.install()
+    folder = tmp_path / "kernels"
+    folder.mkdir()
+    f = keyed(cache_path=str(folder), filename_base="kernel-12.py311", source_stamp=(1.0, 100))
+    f.save(KEY_A, "machine code A")
+    assert f.load(KEY_A) == "machine code A"
+    (folder / "kernel-12.py311.nbi").write_bytes(b"\x80\x04truncated")  # a damaged index
+    assert f.load(KEY_A) is None
+    f.save(KEY_B, "machine code B")  # written again from an empty index
+    assert (f.load(KEY_A), f.load(KEY_B)) == (None, "machine code B")
+    for p in folder.iterdir():  # another process pruned the folder
+        p.unlink()
+    folder.rmdir()
+    f.save(KEY_A, "machine code A")  # numba would raise FileNotFoundError inside the compile
+    assert f.load(KEY_A) is None and not folder.exists()

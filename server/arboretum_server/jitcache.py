@@ -160,6 +160,9 @@ def install() -> type | None:
         _INSTALLED.append(None)
         return None
 
+    unreadable = (OSError, EOFError, ValueError, TypeError, AttributeError, ImportError, IndexError, KeyError,
+                  caching.pickle.UnpicklingError)  # what a damaged index or data file raises on reading
+
     class KeyedCacheFile(caching.IndexDataCacheFile):
         """numba's index and data files, made safe for processes compiling at once: the data file of a version
         is named by ``key_tag`` of its key and stores that tag; it is written whole (numba writes a temporary
@@ -170,23 +173,35 @@ def install() -> type | None:
             return self._data_name_pattern.replace("{number:d}", "k" + key_tag(key)[:24])
 
         def save(self, key: object, data: object) -> None:
+            """Store a compiled version; a folder that cannot be written (removed by ``prune`` in another
+            process, a full disk, no permission) leaves it unsaved: the kernel runs, compiled again next time."""
             name = self._keyed_name(key)
-            self._save_data(name, (key_tag(key), data))
-            with _locked(self._index_path + ".lock"):
-                overloads = self._load_index()
-                if overloads.get(key) != name:
-                    overloads[key] = name
-                    self._save_index(overloads)
+            try:
+                self._save_data(name, (key_tag(key), data))
+                with _locked(self._index_path + ".lock"):
+                    overloads = self._index()
+                    if overloads.get(key) != name:
+                        overloads[key] = name
+                        self._save_index(overloads)
+            except OSError:
+                return
 
         def load(self, key: object) -> object | None:
-            name = self._load_index().get(key)
+            name = self._index().get(key)
             if name is None:
                 return None
             try:
                 tag, data = self._load_data(name)
-            except (OSError, EOFError, ValueError, TypeError, caching.pickle.UnpicklingError):
+            except unreadable:
                 return None
             return data if tag == key_tag(key) else None
+
+        def _index(self) -> dict:
+            """numba's index, or an empty one when it cannot be read (a truncated or foreign file)."""
+            try:
+                return self._load_index()
+            except unreadable:
+                return {}
 
     caching.IndexDataCacheFile = KeyedCacheFile  # numba.core.caching.Cache looks the name up per kernel
     _INSTALLED.append(KeyedCacheFile)
