@@ -200,3 +200,69 @@ def test_a_folder_removed_or_an_index_damaged_costs_a_compile_not_a_failure(tmp_
     folder.rmdir()
     f.save(KEY_A, "machine code A")  # numba would raise FileNotFoundError inside the compile
     assert f.load(KEY_A) is None and not folder.exists()
+
+
+CLOSURES = """import numpy as np
+from {njit_from} import njit
+
+
+def make(k):
+    @njit
+    def inner(x):
+        s = 0
+        for i in range(x.shape[0]):
+            s += (x[i] * k) % 7 + k
+        return s
+    return inner
+
+
+inner1, inner2 = make(1), make(2)  # one name, make.<locals>.inner, two bodies
+
+
+@njit(cache=True)
+def outer1(x):
+    return inner1(x)
+
+
+@njit(cache=True)
+def outer2(x):
+    return inner2(x)
+"""
+CALL = """import json, sys, numpy as np, cmod
+x = np.arange(10, dtype=np.int64)
+print(json.dumps([int(getattr(cmod, n)(x)) for n in sys.argv[1:]]))
+"""
+
+
+def _closures(tmp_path: Path, njit_from: str) -> list[list[int]]:
+    """Compile outer1 and outer2 in two processes (from an empty cache), then load both in a third, in both
+    orders: the answers of each process."""
+    (tmp_path / "cmod.py").write_text(CLOSURES.format(njit_from=njit_from))
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"),
+               PYTHONPATH=os.pathsep.join([str(tmp_path), str(SERVER.parent), str(SERVER.parent.parent / "library")]))
+    answers = []
+    for names in (["outer1"], ["outer2"], ["outer1", "outer2"], ["outer2", "outer1"]):
+        out = subprocess.run([sys.executable, "-c", CALL, *names], env=env, capture_output=True, text=True, timeout=300)
+        assert out.returncode == 0, out.stderr[-2000:]
+        answers.append(json.loads(out.stdout.strip().splitlines()[-1]))
+    return answers
+
+
+def test_numbas_counted_names_cross_two_closures_cached_by_two_processes(tmp_path):
+    """Why RandomUids exists: each process counts from 1, so both name their closure make.<locals>.inner
+    number 2; the process that loads both runs the first body loaded for both kernels."""
+    assert _closures(tmp_path, "numba") == [[34], [47], [34, 34], [47, 47]]
+
+
+def test_random_numbers_keep_each_closure_its_body(tmp_path):
+    assert _closures(tmp_path, "arboretum_server.jitcache") == [[34], [47], [34, 47], [47, 34]]
+
+
+def test_random_uids_are_unique_and_long():
+    uids = jitcache.RandomUids()
+    drawn = [next(uids) for _ in range(2000)]
+    assert len(set(drawn)) == 2000 and min(drawn) >= 1 << jitcache.UID_BITS
+    from numba.core import bytecode
+
+    jitcache.install()
+    assert isinstance(bytecode.FunctionIdentity._unique_ids, jitcache.RandomUids)

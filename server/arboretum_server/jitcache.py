@@ -15,6 +15,15 @@ index can end up naming one version and the file holding the other, and every la
 machine code for those arguments, silently (a shortest path heap run as if empty, an alpha shape judged
 open). ``njit`` here installs ``KeyedCacheFile``: a data file named by its key and holding it, written before
 the index names it, the index updated under a lock. Every kernel of the server is compiled through it.
+
+A third hazard (numba issue 10486): numba names each compiled function by module, name, argument types and a
+number counted from 1 in each process. Two processes can so give one name to two different bodies: two
+closures of one factory (numba's own sort and argsort helpers are such closures) compiled at the same count.
+A process that loads both cached kernels links every call of that name to whichever body it loaded first, and
+the other kernel silently runs the wrong code (session 29: after the synthetic-tree kernel ``throw_darts``
+was loaded, ``is_closed_manifold`` sorted its edge keys with another kernel's sort and called a closed
+tetrahedron open). ``install`` makes the numbers random (``RandomUids``), so names from different processes,
+forked ones too, do not meet.
 """
 
 from __future__ import annotations
@@ -22,6 +31,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
+import secrets
 import shutil
 import sys
 from collections.abc import Iterator
@@ -36,7 +46,7 @@ KEEP = 3
 MARKER = b"numba"
 """A source file whose text holds this is part of the digest (it compiles kernels or imports them)."""
 
-SCHEME = b"keyed-data-files-1"
+SCHEME = b"keyed-data-files-1 random-uids-1"
 """Part of the digest: the layout of the files in a folder (``KeyedCacheFile``). Folders written by numba's own
 numbered layout before session 29 may hold a crossed version, so they are never read again."""
 
@@ -127,6 +137,28 @@ def _locked(path: str) -> Iterator[None]:
 
 _INSTALLED: list[type | None] = []
 
+UID_BITS = 62
+"""Bits of a compiled function's random number (``RandomUids``): two of them meet once in 2**31 draws."""
+
+
+class RandomUids:
+    """numba's counter of compiled functions (``FunctionIdentity._unique_ids``), drawn at random from the
+    operating system instead of counted from 1: each process, and each forked child of one, names its
+    functions apart from every other's. No number is handed out twice within a process."""
+
+    def __init__(self) -> None:
+        self.issued: set[int] = set()
+
+    def __iter__(self) -> RandomUids:
+        return self
+
+    def __next__(self) -> int:
+        while True:
+            uid = secrets.randbits(UID_BITS) | 1 << UID_BITS  # always UID_BITS + 1 bits long
+            if uid not in self.issued:
+                self.issued.add(uid)
+                return uid
+
 NEEDED = ("_load_index", "_save_index", "_load_data", "_save_data")
 """Methods of numba's ``IndexDataCacheFile`` that ``KeyedCacheFile`` builds on (numba 0.60-0.68)."""
 
@@ -144,16 +176,23 @@ def layout_known(cls: type) -> bool:
 
 
 def install() -> type | None:
-    """Make numba's caches use ``KeyedCacheFile`` (once per process; numba reads the class name when a kernel
-    with ``cache=True`` is defined, so call this before). Returns the class; None when this numba's cache
-    files are not the layout it knows (``layout_known``)."""
+    """Make numba name compiled functions with ``RandomUids`` and its caches use ``KeyedCacheFile`` (once per
+    process; numba reads the class name when a kernel with ``cache=True`` is defined, so call this before any
+    is). Returns the class; None when this numba's cache files are not the layout it knows (``layout_known``).
+    A numba without the counter (a later release) keeps its own, with a warning."""
     if _INSTALLED:
         return _INSTALLED[0]
-    from numba.core import caching
+    import warnings
 
+    from numba.core import bytecode, caching
+
+    if hasattr(bytecode, "FunctionIdentity") and hasattr(bytecode.FunctionIdentity, "_unique_ids"):
+        bytecode.FunctionIdentity._unique_ids = RandomUids()  # before any kernel of ours is compiled
+    else:
+        warnings.warn(f"numba {getattr(sys.modules.get('numba'), '__version__', '?')}: no function counter to "
+                      "replace; cached kernels compiled by different processes may share names (numba issue 10486)",
+                      RuntimeWarning, stacklevel=2)
     if not layout_known(caching.IndexDataCacheFile):
-        import warnings
-
         warnings.warn(f"numba {getattr(sys.modules.get('numba'), '__version__', '?')}: unknown cache-file layout; "
                       "kernels saved by processes compiling at once may be crossed (see arboretum_server.jitcache)",
                       RuntimeWarning, stacklevel=2)
