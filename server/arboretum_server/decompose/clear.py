@@ -27,12 +27,15 @@ from .blockers import Blockers, Pairs, own_rows
 from .hullpack import (
     HullPack,
     any_inside,
+    any_inside_along,
     clear_prefix,
     first_clear_route,
     inside_any,
     join_packs,
     pack_hull,
     segments_blocked,
+    splice_packs,
+    vertex_first,
 )
 from .memo import ArrayMemo
 from .merge import BranchSet, resample_step
@@ -75,7 +78,7 @@ def _packed(lobes: list[LobeState]) -> tuple[HullPack, tuple[np.ndarray, np.ndar
     branch keeps its hull, and its lobe list asked again, 63 of the 78 misses of a pine split into 20, built
     the ids key again)."""
     last = _LAST[0]
-    if last is not None and len(last[0]) == len(lobes):
+    if lobes and last is not None and len(last[0]) == len(lobes):
         if all(map(is_, last[0], lobes)):
             return last[1]
         if all(map(is_, last[2], map(_VERTICES, lobes))) and all(map(is_, last[3], map(_FACES, lobes))):
@@ -94,15 +97,46 @@ def _packed_by_hulls(lobes: list[LobeState]) -> tuple[HullPack, tuple[np.ndarray
         if hit is not None:
             _PACKS.move_to_end(key)
             return hit[1], hit[2]
-    parts = [_hull(lb) for lb in lobes]
-    pack = join_packs([p[0] for p in parts])
-    box = (np.array([p[1] for p in parts]).reshape(-1, 3), np.array([p[2] for p in parts]).reshape(-1, 3))
+    pack, box = _joined(lobes)
     for a in box:
         a.flags.writeable = False  # shared by every caller until the hulls change
     with _PACKS_LOCK:
         _PACKS[key] = ([*map(_VERTICES, lobes), *map(_FACES, lobes)], pack, box)
         while len(_PACKS) > PACKS_KEPT:
             _PACKS.popitem(last=False)
+    return pack, box
+
+
+_JOINED: list = [None]
+"""The last pack ``_joined`` made: (hull vertex arrays, face arrays (tuples: they hold them), the pack, its
+``vertex_first``, the hulls' boxes)."""
+SPLICE_MOST = 0.25
+"""``_joined`` splices the last pack when at most this share of its hulls changed (else joins every hull)."""
+
+
+def _joined(lobes: list[LobeState]) -> tuple[HullPack, tuple[np.ndarray, np.ndarray]]:
+    """``join_packs`` of the lobes' hulls' packs and their boxes (lo (L, 3), hi (L, 3)): the same arrays, spliced
+    from the last ones made when the lobes hold the same hull arrays but for a few (``hullpack.splice_packs``, the
+    changed rows of the boxes set; session 29: ``carve_route`` and ``along`` pack every trial list of a split's 60
+    lobes with 1-3 hulls carved again, 0.75 ms each)."""
+    verts, faces = tuple(map(_VERTICES, lobes)), tuple(map(_FACES, lobes))
+    last = _JOINED[0]
+    if lobes and last is not None and len(last[0]) == len(lobes):
+        changed = [i for i in range(len(lobes)) if verts[i] is not last[0][i] or faces[i] is not last[1][i]]
+        if len(changed) <= SPLICE_MOST * len(lobes):
+            new = {i: _hull(lobes[i]) for i in changed}
+            pack = splice_packs(last[2], last[3], {i: p[0] for i, p in new.items()})
+            lo, hi = last[4][0].copy(), last[4][1].copy()
+            n_verts = np.diff(last[3])
+            for i, p in new.items():
+                lo[i], hi[i], n_verts[i] = p[1], p[2], len(p[0].vertices)
+            _JOINED[0] = (verts, faces, pack, np.r_[0, np.cumsum(n_verts)].astype(np.int64), (lo, hi))
+            return pack, (lo, hi)
+    parts = [_hull(lb) for lb in lobes]
+    packs = [p[0] for p in parts]
+    pack = join_packs(packs)
+    box = (np.array([p[1] for p in parts]).reshape(-1, 3), np.array([p[2] for p in parts]).reshape(-1, 3))
+    _JOINED[0] = (verts, faces, pack, vertex_first(packs), box)
     return pack, box
 
 
@@ -138,7 +172,9 @@ def foreign(lobes: list[LobeState], j: int, seg: np.ndarray, tol: float,
     session 27: the bench's 8 splits in 20 made 142,705 hull tests in their point tests, 24,224 this way)."""
     pack, own = _packed(lobes)
     lo, hi = box if box is not None else own
-    found, tests = any_inside(pack, lo, hi, j, resample_step(seg, tol))
+    found, tests, done = any_inside_along(pack, lo, hi, j, seg, tol)  # session 29: one compiled call
+    if not done:  # a segment ``resample_step`` leaves to its numpy reference
+        found, tests = any_inside(pack, lo, hi, j, resample_step(seg, tol))
     WORK["hull_tests"] += tests
     return found
 

@@ -166,6 +166,61 @@ def join_packs(packs: list[HullPack]) -> HullPack:
                     np.r_[0, np.cumsum(n_cells)].astype(np.int64), starts.astype(np.int64), cell_faces)
 
 
+def vertex_first(packs: list[HullPack]) -> np.ndarray:
+    """(H + 1,) int64: where each hull's vertices start in ``join_packs(packs)``'s vertices (for ``splice_packs``)."""
+    return np.r_[0, np.cumsum([len(p.vertices) for p in packs])].astype(np.int64)
+
+
+def splice_packs(old: HullPack, vfirst: np.ndarray, new: dict[int, HullPack]) -> HullPack:
+    """``join_packs(packs)``, the same arrays, where ``packs[h]`` is ``old``'s hull h (``old`` a ``join_packs``
+    result, ``vfirst`` its ``vertex_first``) except the hulls ``new[h]`` (one hull each) that replace it: each
+    run of unchanged hulls is copied from ``old`` whole, its indices shifted by the change in its offsets, so a
+    pack with 1-3 of 60 hulls carved again costs a copy of each array instead of a join of 60 hulls (session 29;
+    the same integer sums, so the same numbers)."""
+    n_hulls = len(old.first) - 1
+    o_v, o_f, o_c = vfirst, old.first, old.cell_first
+    o_e = old.cell_start[o_c]
+    counts = [np.diff(o_v), np.diff(o_f), np.diff(o_c), np.diff(o_e)]
+    for i, p in new.items():
+        for k, n in enumerate((len(p.vertices), len(p.faces), len(p.cell_start) - 1, len(p.cell_faces))):
+            counts[k][i] = n
+    v_at, f_at, c_at, e_at = (np.r_[0, np.cumsum(n)].astype(np.int64) for n in counts)
+    verts, faces = np.zeros((v_at[-1], 3)), np.zeros((f_at[-1], 3), np.int64)
+    flo, fhi, ftop = np.zeros((f_at[-1], 2)), np.zeros((f_at[-1], 2)), np.zeros(f_at[-1])
+    grid, starts, cells = np.zeros((n_hulls, 6)), np.zeros(c_at[-1] + 1, np.int64), np.zeros(e_at[-1], np.int64)
+    for a, b, p in _runs(n_hulls, new):
+        fs, cs, es = slice(f_at[a], f_at[b]), slice(c_at[a], c_at[b]), slice(e_at[a], e_at[b])
+        if p is None:  # hulls a..b-1 of ``old``
+            of, oc, oe = slice(o_f[a], o_f[b]), slice(o_c[a], o_c[b]), slice(o_e[a], o_e[b])
+            verts[v_at[a]:v_at[b]] = old.vertices[o_v[a]:o_v[b]]
+            np.add(old.faces[of], v_at[a] - o_v[a], out=faces[fs])
+            flo[fs], fhi[fs], ftop[fs], grid[a:b] = old.face_lo[of], old.face_hi[of], old.face_top[of], old.grid[a:b]
+            np.add(old.cell_start[oc], e_at[a] - o_e[a], out=starts[cs])
+            np.add(old.cell_faces[oe], f_at[a] - o_f[a], out=cells[es])
+        else:  # hull a replaced: placed as ``join_packs`` places it
+            verts[v_at[a]:v_at[b]] = p.vertices
+            np.add(p.faces, v_at[a], out=faces[fs])
+            flo[fs], fhi[fs], ftop[fs], grid[a:b] = p.face_lo, p.face_hi, p.face_top, p.grid
+            np.add(p.cell_start[:-1], e_at[a], out=starts[cs])
+            np.add(p.cell_faces, f_at[a], out=cells[es])
+    starts[-1] = e_at[-1]
+    return HullPack(verts, faces, f_at, flo, fhi, ftop, grid, c_at, starts, cells)
+
+
+def _runs(n_hulls: int, new: dict[int, HullPack]) -> list[tuple[int, int, HullPack | None]]:
+    """(a, b, pack): the hulls 0..``n_hulls - 1`` in runs of unchanged ones (pack None) and single replaced ones."""
+    out: list[tuple[int, int, HullPack | None]] = []
+    h = 0
+    for i in sorted(new):
+        if i > h:
+            out.append((h, i, None))
+        out.append((i, i + 1, new[i]))
+        h = i + 1
+    if h < n_hulls:
+        out.append((h, n_hulls, None))
+    return out
+
+
 def inside_any(pack: HullPack, lo: np.ndarray, hi: np.ndarray, skip: int, q: np.ndarray) -> tuple[np.ndarray, int]:
     """((M,) bool, hull tests): which ``q`` (M, 3) lie inside a hull of ``pack`` other than ``skip``, each
     hull tried only for points strictly inside its box (``lo``, ``hi`` (H, 3)) and only until one holds the
@@ -308,6 +363,33 @@ def _any_inside_kernel(v, f, cells, flo, fhi, ftop, lo, hi, skip, q, stride):  #
                 return True, tests[0]
     return False, tests[0]
 
+
+
+def any_inside_along(pack: HullPack, lo: np.ndarray, hi: np.ndarray, skip: int, seg: np.ndarray, tol: float,
+                     stride: int = 4) -> tuple[bool, int, bool]:
+    """(found, hull tests, done): ``any_inside(pack, lo, hi, skip, merge.resample_step(seg, tol))`` in one compiled
+    call (``clear.foreign``'s question, asked hundreds of times a split: session 29), the same samples
+    (``merge._resample_kernel``) and the same hull tests. ``done`` False (nothing tested): ``seg`` is one that
+    ``resample_step`` leaves to its numpy reference (not (N >= 2, 3), ``tol`` not > 0, a non-finite length); the
+    caller asks it the old way."""
+    pts = np.ascontiguousarray(seg, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 2 or not (tol > 0):
+        return False, 0, False
+    found, tests, done = _along_inside_kernel(pack.vertices, pack.faces, _cells(pack), pack.face_lo, pack.face_hi,
+                                              pack.face_top, _read_only(lo), _read_only(hi), int(skip),
+                                              pts if pts.flags.writeable else pts.copy(), float(tol), int(stride))
+    return bool(found), int(tests), bool(done)
+
+
+@njit(cache=True)
+def _along_inside_kernel(v, f, cells, flo, fhi, ftop, lo, hi, skip, seg, tol, stride):  # pragma: no cover
+    """``any_inside_along``'s call: ``seg`` resampled, then ``_any_inside_kernel``; (False, 0, False) when the
+    resampling gives nothing."""
+    q = _resample_kernel(seg, tol)
+    if q.shape[0] == 0:
+        return False, 0, False
+    found, tests = _any_inside_kernel(v, f, cells, flo, fhi, ftop, lo, hi, skip, q, stride)
+    return found, tests, True
 
 
 def first_clear_route(pack: HullPack, lo: np.ndarray, hi: np.ndarray, skip: int, seg: np.ndarray,
@@ -538,6 +620,7 @@ def warm() -> None:
     q = np.full((1, 3), 0.1)
     inside_any(pack, lo, hi, -1, q)
     any_inside(pack, lo, hi, -1, q)
+    any_inside_along(pack, lo, hi, -1, v, 0.05)
     segments_blocked(pack, lo, hi, -1, q, q + 0.1, np.array([3]), until_clear=True)
     segments_blocked(pack, lo, hi, -1, q, q + 0.1, np.array([3]), prior=np.array([-1]), by=np.full(1, -1))
     first_clear_route(pack, lo, hi, -1, v, q[0], np.array([1]), np.array([3]), 0.05)

@@ -29,12 +29,14 @@ from arboretum_server.jitcache import njit
 from .graph import query_threads
 from .tetloops import boundary as _boundary
 from .tetloops import circumspheres as _circumspheres
+from .tetloops import compact as _compacted
 from .tetloops import covered as _covered
 from .tetloops import drop_edges as _drop_edges
 from .tetloops import flat as _flat
 from .tetloops import held as _held
 from .tetloops import is_closed_manifold as is_closed_manifold
 from .tetloops import orient as _orient
+from .tetloops import pinched_edges as _pinched
 
 MIN_COVER = 0.95
 """Smallest fraction of a cluster's points the alpha shape must touch; otherwise the convex hull."""
@@ -118,10 +120,11 @@ class Tetrahedra:
         live = np.flatnonzero(self.radii < reach)
         held = _held(self.centres[live], self.radii[live], blockers)
         unsure = live[held == 2]
-        near = cKDTree(blockers).query(self.centres[unsure], distance_upper_bound=reach)[0]
         out.radii = self.radii.copy()
         out.radii[live[held == 1]] = np.inf
-        out.radii[unsure[near < self.radii[unsure]]] = np.inf
+        if len(unsure):  # seldom: no KD-tree of the blockers built for nothing (session 29)
+            near = cKDTree(blockers).query(self.centres[unsure], distance_upper_bound=reach)[0]
+            out.radii[unsure[near < self.radii[unsure]]] = np.inf
         return out
 
 
@@ -204,13 +207,24 @@ def _edge_keys(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _pinched_edges(faces: np.ndarray) -> np.ndarray:
-    """Keys of the edges that border more than two of ``faces`` (F, 3)."""
+    """Keys of the edges that border more than two of ``faces`` (F, 3): ``_pinched_edges_reference`` compiled
+    (``tetloops.pinched_edges``)."""
+    return _pinched(faces)
+
+
+def _pinched_edges_reference(faces: np.ndarray) -> np.ndarray:
+    """``_pinched_edges`` in numpy (the reference the tests hold it to)."""
     keys = np.concatenate([_edge_keys(faces[:, i], faces[:, (i + 1) % 3]) for i in range(3)])
     u, cnt = np.unique(keys, return_counts=True)
     return u[cnt > 2]
 
 
 def _compact(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``_compact_reference`` in one compiled call (``tetloops.compact``), the same arrays."""
+    return _compacted(points, faces) or _compact_reference(points, faces)
+
+
+def _compact_reference(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(the points ``faces`` (F, 3) use, in index order; the faces renumbered into them, int32): what
     ``np.unique(faces, return_inverse=True)`` gives, by a mask and its running count instead of a sort."""
     mark = np.zeros(len(points), bool)

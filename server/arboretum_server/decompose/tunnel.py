@@ -42,6 +42,16 @@ def enters(lb: LobeState, wood: np.ndarray, box: tuple[np.ndarray, np.ndarray] |
     return bool(len(near) and inside(lb.hull_vertices, lb.hull_faces, near).any())
 
 
+def _boxes_meet(lo: np.ndarray, hi: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(L,) bool: whether each box (``lo``, ``hi`` (L, 3)) may strictly hold one of the points ``q`` (Q, 3): False
+    only where none of them lies strictly inside it (the box of ``q``, its nan left out as the strict tests leave
+    them, misses it), so ``enters`` and
+    ``lobes_entered`` skip those lobes with the same answers (session 29)."""
+    if not len(q):
+        return np.zeros(len(lo), bool)
+    return ((np.fmin.reduce(q, axis=0) < hi) & (np.fmax.reduce(q, axis=0) > lo)).all(axis=1)  # nan: left out
+
+
 def lobes_entered(lobes: list[LobeState], which: list[int], woods: list[np.ndarray]) -> np.ndarray:
     """(W,) int: how many of the lobes ``which`` each of ``woods`` ((P_i, 3) each) enters: ``enters`` for
     every pair, one inside test per lobe over all the woods' points in its box (session 21: ``_routes``
@@ -52,7 +62,10 @@ def lobes_entered(lobes: list[LobeState], which: list[int], woods: list[np.ndarr
     owner = np.repeat(np.arange(len(woods)), [len(w) for w in woods])
     q = np.concatenate(woods)
     los, his = boxes(lobes)  # each hull's box, kept (session 28: not its vertices' least and greatest again)
+    meets = _boxes_meet(los, his, q)
     for k in which:
+        if not meets[k]:  # no point in its box: no hit
+            continue
         lb, lo, hi = lobes[k], los[k], his[k]
         near = ((q > lo) & (q < hi)).all(axis=1)
         hit = np.zeros(len(woods), bool)
@@ -115,15 +128,15 @@ def carve_route(lobes: list[LobeState], n_kept: int, j: int, route: tuple[np.nda
     tol = o.step / 2
     wood = sample_polylines([route[0]], step)
     lo, hi = boxes(lobes)
-    in_way = [k for k in range(n_kept, len(lobes)) if k != j and enters(lobes[k], wood, (lo[k], hi[k]))]
-    sampled: dict[int, np.ndarray] = {}  # each branch sampled once per call (as ``sample_polylines`` samples it)
+    meets = _boxes_meet(lo, hi, wood)
+    in_way = [k for k in range(n_kept, len(lobes)) if k != j and meets[k] and enters(lobes[k], wood, (lo[k], hi[k]))]
     for with_others in (False, True):
         trial = list(lobes)
         carved = []
+        pool = _others_pool(lobes, {j, *in_way} if len(in_way) == 1 else {j}, wood, step) \
+            if with_others and in_way else None
         for k in in_way:
-            others = [_sampled(sampled, lobes, i, step) for i in range(len(lobes)) if i not in (j, k)] \
-                if with_others else []
-            blockers = np.concatenate([wood, *others]) if others else wood
+            blockers = wood if pool is None or not pool[2] else pool[0][pool[1] != k]
             if carve_lobe(trial, k, pts, blockers, o.alpha_radius):
                 carved.append(k)
         trial[j] = replace(trial[j], segment=route[0], parent=route[1], parent_vertex=route[2])
@@ -135,11 +148,17 @@ def carve_route(lobes: list[LobeState], n_kept: int, j: int, route: tuple[np.nda
     return False
 
 
-def _sampled(kept: dict[int, np.ndarray], lobes: list[LobeState], i: int, step: float) -> np.ndarray:
-    """Lobe ``i``'s branch resampled every ``step``, made once per ``kept`` (a ``carve_route`` call's)."""
-    if i not in kept:
-        kept[i] = resample_step(lobes[i].segment, step)
-    return kept[i]
+def _others_pool(lobes: list[LobeState], skip: set[int], wood: np.ndarray,
+                 step: float) -> tuple[np.ndarray, np.ndarray, bool]:
+    """(``wood`` then the branch of every lobe not in ``skip`` resampled every ``step``, in lobe order; each
+    row's lobe, -1 for ``wood``; False when no branch is in it): ``pool[owner != k]`` is the blockers
+    ``carve_route`` carves lobe k with when every branch but the carved lobe's and the routed lobe's is a blocker
+    too (the same rows in the same order as joining them anew for each k, and the same branches resampled;
+    session 29), ``wood`` alone when there is none."""
+    others = [i for i in range(len(lobes)) if i not in skip]
+    parts = [wood, *(resample_step(lobes[i].segment, step) for i in others)]
+    owner = np.repeat(np.array([-1, *others], np.int64), [len(p) for p in parts])
+    return np.concatenate(parts), owner, bool(others)
 
 
 def moved_centre(lobes: list[LobeState], j: int, pts: np.ndarray, mains: BranchSet, tries: int = 32) -> None:
