@@ -53,3 +53,18 @@ def toy_tree():
     from factories import toy_tree_scan
 
     return toy_tree_scan()
+
+
+@pytest.fixture
+def served(tmp_path):
+    """A running service (a Server on a free local port) over a fresh state folder and a 2-example library."""
+    from arboretum_server.service.context import Context
+    from arboretum_server.service.dispatch import Dispatcher
+    from arboretum_server.service.sessions import Sessions
+    from arboretum_server.service.socket import Server
+    from factories import make_library, serving
+
+    ctx = Context(Sessions(tmp_path / "state"), make_library(tmp_path / "lib", 2))
+    with serving(Server(Dispatcher(ctx), "tcp://127.0.0.1:0")) as server:
+        yield server
+    ctx.close()

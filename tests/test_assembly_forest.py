@@ -25,7 +25,7 @@ from arboretum_server.service.context import Context
 from arboretum_server.service.dispatch import Dispatcher
 from arboretum_server.service.sessions import Sessions
 from arboretum_server.service.socket import Server
-from factories import make_library, serving
+from factories import make_library
 
 NAMES = ("a", "b", "c", "d", "e", "f")
 ALL = tuple(Placement(n, "ex-0", make_transform(t=[0, 0, 0.1 * i])) for i, n in enumerate(NAMES))
@@ -153,14 +153,6 @@ def test_sessions_with_a_cyclic_snapshot_or_journal_entry_are_moved_to_damaged(t
 
 
 # -- session.load over the socket ----------------------------------------------------------------------
-@pytest.fixture
-def served(tmp_path):
-    ctx = Context(Sessions(tmp_path / "state"), make_library(tmp_path / "lib", 2))
-    with serving(Server(Dispatcher(ctx), "tcp://127.0.0.1:0")) as server:
-        yield server
-    ctx.close()
-
-
 def request(server: Server, frames: list) -> P.Msg:
     s = zmq.Context.instance().socket(zmq.DEALER)
     s.setsockopt(zmq.LINGER, 0)

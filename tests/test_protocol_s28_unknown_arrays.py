@@ -17,11 +17,6 @@ from arboretum_library.assembly import Assembly, Placement
 from arboretum_library.errors import ProtocolError
 from arboretum_library.geometry import make_transform
 from arboretum_library.wire import Message, encode
-from arboretum_server.service.context import Context
-from arboretum_server.service.dispatch import Dispatcher
-from arboretum_server.service.sessions import Sessions
-from arboretum_server.service.socket import Server
-from factories import make_library, serving
 
 
 def refused(m: Message) -> str:
@@ -79,14 +74,6 @@ def test_replies_and_events_keep_ignoring_what_they_do_not_know():
     assert P.parse(encode(Message("pong", 8, {"later": 1}, {"extra": np.zeros(3)})))[1] == P.Pong()
     assert isinstance(P.parse(encode(Message("progress", 9, {"done": 1.0, "new": "x"})))[1], P.Progress)
     assert P.parse(encode(Message("ping", 10, {}, {}, client="abc")))[1] == P.Ping()  # header keys: as before
-
-
-@pytest.fixture
-def served(tmp_path):
-    ctx = Context(Sessions(tmp_path / "state"), make_library(tmp_path / "lib", 2))
-    with serving(Server(Dispatcher(ctx), "tcp://127.0.0.1:0")) as server:
-        yield server
-    ctx.close()
 
 
 def test_a_server_answers_the_protocol_error_and_serves_on(served):
