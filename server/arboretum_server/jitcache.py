@@ -47,8 +47,9 @@ MARKER = b"numba"
 """A source file whose text holds this is part of the digest (it compiles kernels or imports them)."""
 
 SCHEME = b"keyed-data-files-1 random-uids-1"
-"""Part of the digest: the layout of the files in a folder (``KeyedCacheFile``). Folders written by numba's own
-numbered layout before session 29 may hold a crossed version, so they are never read again."""
+"""Part of the digest: the layout of the files in a folder (``KeyedCacheFile``) and the naming of compiled functions
+(``RandomUids``). Folders written before session 29 may hold a crossed version or a shared name, so they are never
+read again."""
 
 
 def kernel_digest(package: Path) -> str:
@@ -138,7 +139,8 @@ def _locked(path: str) -> Iterator[None]:
 _INSTALLED: list[type | None] = []
 
 UID_BITS = 62
-"""Bits of a compiled function's random number (``RandomUids``): two of them meet once in 2**31 draws."""
+"""Bits of a compiled function's random number (``RandomUids``): two processes compiling n and m functions share a
+number with odds of about n * m / 2**62 (a few thousand each: under 1e-11)."""
 
 
 class RandomUids:
@@ -158,6 +160,7 @@ class RandomUids:
             if uid not in self.issued:
                 self.issued.add(uid)
                 return uid
+
 
 NEEDED = ("_load_index", "_save_index", "_load_data", "_save_data")
 """Methods of numba's ``IndexDataCacheFile`` that ``KeyedCacheFile`` builds on (numba 0.60-0.68)."""
@@ -248,7 +251,8 @@ def install() -> type | None:
 
 
 def njit(*args, **kwargs):
-    """``numba.njit`` with ``KeyedCacheFile`` installed first: how every kernel of the server is compiled."""
+    """``numba.njit`` after ``install`` (random function numbers, ``KeyedCacheFile``): how every kernel of the server
+    is compiled."""
     import numba
 
     install()
