@@ -140,6 +140,12 @@ def _joined(lobes: list[LobeState]) -> tuple[HullPack, tuple[np.ndarray, np.ndar
     return pack, box
 
 
+def _pack_and_box(lobes: list[LobeState], box: tuple[np.ndarray, np.ndarray] | None) -> tuple[HullPack, tuple]:
+    """The lobes' joined hulls (``_packed``) and the boxes to test them by: ``box`` when given, else their own."""
+    pack, own = _packed(lobes)
+    return pack, (box if box is not None else own)
+
+
 def boxes(lobes: list[LobeState]) -> tuple[np.ndarray, np.ndarray]:
     """Bounding boxes (lo (L, 3), hi (L, 3)) of the lobes' hulls."""
     return _packed(lobes)[1]
@@ -158,8 +164,7 @@ def inside_foreign(lobes: list[LobeState], j: int, q: np.ndarray,
                    box: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """(M,) bool: which of the points ``q`` (M, 3) lie inside a lobe other than ``j`` (a lobe is tested
     only for points inside ``box``, its bounding box by default; ``hullpack.inside_any``)."""
-    pack, own = _packed(lobes)
-    lo, hi = box if box is not None else own
+    pack, (lo, hi) = _pack_and_box(lobes, box)
     out, tests = inside_any(pack, lo, hi, j, q)
     WORK["hull_tests"] += tests
     return out
@@ -170,15 +175,12 @@ def foreign(lobes: list[LobeState], j: int, seg: np.ndarray, tol: float,
     """True if a vertex of ``seg`` (resampled every ``tol``) lies inside a lobe other than ``j``: the answer of
     ``inside_foreign(...).any()``, its vertices tried up to the first one inside (``hullpack.any_inside``;
     session 27: the bench's 8 splits in 20 made 142,705 hull tests in their point tests, 24,224 this way)."""
-    pack, own = _packed(lobes)
-    lo, hi = box if box is not None else own
+    pack, (lo, hi) = _pack_and_box(lobes, box)
     found, tests, done = any_inside_along(pack, lo, hi, j, seg, tol)  # session 29: one compiled call
     if not done:  # a segment ``resample_step`` leaves to its numpy reference
         found, tests = any_inside(pack, lo, hi, j, resample_step(seg, tol))
     WORK["hull_tests"] += tests
     return found
-
-
 
 
 def first_clear_along(lobes: list[LobeState], j: int, seg: np.ndarray, centre: np.ndarray, order: np.ndarray,
@@ -189,8 +191,7 @@ def first_clear_along(lobes: list[LobeState], j: int, seg: np.ndarray, centre: n
     tested in one compiled call up to that one (``hullpack.first_clear_route``: the same answers and hull
     tests). ``resume`` >= 0: the routes from ``resume`` on are left to the caller (one resampled to nothing).
     ``clear`` (R,) bool, when given: every route tried and each clear one's entry set (``i`` is then -1)."""
-    pack, own = _packed(lobes)
-    lo, hi = box if box is not None else own
+    pack, (lo, hi) = _pack_and_box(lobes, box)
     i, tests, resume = first_clear_route(pack, lo, hi, j, seg, centre, order, counts, tol, clear=clear)
     WORK["hull_tests"] += tests
     return i, resume
@@ -201,11 +202,11 @@ def clear_prefix_length(lobes: list[LobeState], j: int, seg: np.ndarray, tol: fl
     """(ok, resume): how many of ``seg``'s first prefixes ``foreign`` finds clear in turn, up to the first it
     does not, in one compiled call (``hullpack.clear_prefix``: the same answers and hull tests). ``resume`` >= 0:
     the prefixes from ``seg[:resume + 1]`` on are left to the caller (``ok`` is then ``resume``)."""
-    pack, own = _packed(lobes)
-    lo, hi = box if box is not None else own
+    pack, (lo, hi) = _pack_and_box(lobes, box)
     ok, tests, resume = clear_prefix(pack, lo, hi, j, seg, tol)
     WORK["hull_tests"] += tests
     return ok, resume
+
 
 _MAIN_VERTICES = ArrayMemo()
 """``main_vertices`` by the first main segment's array, with the segments it was computed for: the repairs

@@ -364,7 +364,6 @@ def _any_inside_kernel(v, f, cells, flo, fhi, ftop, lo, hi, skip, q, stride):  #
     return False, tests[0]
 
 
-
 def any_inside_along(pack: HullPack, lo: np.ndarray, hi: np.ndarray, skip: int, seg: np.ndarray, tol: float,
                      stride: int = 4) -> tuple[bool, int, bool]:
     """(found, hull tests, done): ``any_inside(pack, lo, hi, skip, merge.resample_step(seg, tol))`` in one compiled
@@ -424,7 +423,6 @@ def clear_prefix(pack: HullPack, lo: np.ndarray, hi: np.ndarray, skip: int, seg:
                           _read_only(lo), _read_only(hi), int(skip), seg, float(tol), int(stride))
 
 
-
 @njit(cache=True)
 def _routes_kernel(v, f, cells, flo, fhi, ftop, lo, hi, skip, seg, centre, order, counts, tol,
                    stride, clear, every):  # pragma: no cover - numba
@@ -479,6 +477,7 @@ def _prefix_kernel(v, f, cells, flo, fhi, ftop, lo, hi, skip, seg, tol, stride):
         if found:
             return ok, tests, -1
     return seg.shape[0], tests, -1
+
 
 @njit(cache=True)
 def _hulls_meeting(lo, hi, skip, q, near) -> int:  # pragma: no cover
