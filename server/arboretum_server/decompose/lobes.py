@@ -57,26 +57,15 @@ FLAT = 1e-10
 than 3 probe radii lie below 1e-12 and the rest above 1e-6 (session 18)."""
 
 
-KMEANS_THREADS = 1
-"""OpenMP threads for k-means, fixed so a decomposition is the same bit for bit on any machine and in a
-batch worker (which runs with one thread): with 2 threads the centres differed in their last bits from
-one thread's, and every lobe with them (session 24)."""
-
-
 def kmeans(points: np.ndarray, k: int, rng: np.random.Generator, init: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Cluster ``points`` (N, 3) into ``k`` groups: (labels (N,) int32, centres (k, 3)).
+    """Cluster ``points`` (N, 3) into ``k`` groups: (labels (N,) int32, centres (k, 3)), by ``clusters.kmeans``
+    (k-means++ and Lloyd's rounds, compiled, one thread: the same centres on any machine) seeded by one draw
+    from ``rng``. Until session 30 scikit-learn's ``KMeans`` (on one OpenMP thread, session 24), whose import
+    cost every ``arboretum decompose`` 0.9-1.3 s."""
+    from .clusters import kmeans as _kmeans
 
-    One OpenMP thread (``KMEANS_THREADS``): scikit-learn sums each thread's share of the points apart, so
-    the centres, and every lobe after them, would depend on the machine's core count."""
-    from sklearn.cluster import KMeans
-    from threadpoolctl import threadpool_limits
-
-    k = int(min(k, len(points)))
-    seed = int(rng.integers(2**31 - 1))
-    km = KMeans(n_clusters=k, n_init=1, random_state=seed, init="k-means++" if init is None else init)
-    with threadpool_limits(limits=KMEANS_THREADS, user_api="openmp"):
-        lab = km.fit_predict(points).astype(np.int32)
-    return lab, km.cluster_centers_.astype(np.float64)
+    seed = int(rng.integers(2**31 - 1))  # one draw, as before: the caller's generator moves on as it did
+    return _kmeans(points, k, np.random.default_rng(seed), init)
 
 
 class Tetrahedra:

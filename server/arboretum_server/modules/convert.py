@@ -166,7 +166,7 @@ def _cluster(sig: np.ndarray, k: int, rng: np.random.Generator) -> tuple[np.ndar
 
     k = min(k, len(np.unique(sig.round(12), axis=0)))
     km = KMeans(n_clusters=k, n_init=4, random_state=int(rng.integers(0, 2**31 - 1)))
-    with threadpool_limits(limits=1, user_api="openmp"):  # the same types on any core count (lobes.KMEANS_THREADS)
+    with threadpool_limits(limits=1, user_api="openmp"):  # the same types on any core count (as the lobes' k-means, session 24)
         km.fit(sig)
     labels = km.labels_.astype(np.int64)
     _, first = np.unique(labels, return_index=True)

@@ -25,7 +25,7 @@ from arboretum_server.service.jobs import Job
 from arboretum_server.service.sessions import RefineDraft, Session
 
 EDITS = ("remove_lobe", "insert_lobe", "merge_lobes", "split_lobe")
-WARM = ("arboretum_server.decompose.refine", "sklearn.cluster", "arboretum_server.decompose.examples",
+WARM = ("arboretum_server.decompose.refine", "arboretum_server.decompose.clusters", "arboretum_server.decompose.examples",
         "arboretum_server.decompose.tetloops", "arboretum_server.decompose.merge",
         "arboretum_server.decompose.similarity", "arboretum_server.decompose.hullpack",
         "arboretum_server.decompose.graph", "arboretum_server.decompose.grid", "arboretum_server.decompose.lobes",
