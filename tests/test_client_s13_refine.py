@@ -24,26 +24,54 @@ def _open(app, runner):
 
 
 def _front_lobe(app) -> int:
-    """The lobe with the most points among those nearest the camera."""
+    """The lobe nearest the camera among those of 30 points or more."""
     cloud, eye = app.state.cloud, app.desktop.camera.eye
     lobes = [j for j in range(len(app.state.draft.lobes)) if (cloud.lobe_of == j).sum() >= 30]
     return min(lobes, key=lambda j: np.linalg.norm(cloud.points[cloud.lobe_of == j].mean(axis=0) - eye))
 
 
-def _stroke_over(cloud, lobe: int) -> list[list[float]]:
-    """Three points of ``lobe`` along its longest extent."""
+def _two_strokes(app) -> tuple[int, list, list]:
+    """(lobe, first, second): the lobe nearest the camera, of 30 points or more, on which two strokes drawn over
+    its two halves (5 of its points each, along its longest extent across the line of sight) land on points
+    not all shared. A stroke lands on the point nearest the eye within the brush (5 cm) of the cursor's ray
+    (``Interaction._on_cloud``): on a lobe 4-9 cm across, or behind another, two one-point strokes along its
+    longest extent landed on one point (session 30's lobes)."""
+    cloud, eye, brush = app.state.cloud, app.desktop.camera.eye, app.interaction.brush
+    lobes = [j for j in range(len(app.state.draft.lobes)) if (cloud.lobe_of == j).sum() >= 30]
+    lobes.sort(key=lambda j: np.linalg.norm(cloud.points[cloud.lobe_of == j].mean(axis=0) - eye))
+
+    def lands(p) -> int:
+        ray = (np.asarray(p) - eye) / np.linalg.norm(np.asarray(p) - eye)
+        rel = cloud.points - eye
+        t = rel @ ray
+        near = np.flatnonzero(np.linalg.norm(rel - t[:, None] * ray, axis=1) <= brush)
+        return int(near[np.argmin(t[near])])
+
+    for j in lobes:
+        line = _stroke_over(cloud, j, eye, np.linspace(0.0, 1.0, 10))
+        first, second = line[:5], line[5:]
+        if {lands(p) for p in second} - {lands(p) for p in first}:
+            return j, first, second
+    raise AssertionError("no lobe takes two strokes landing apart")
+
+
+def _stroke_over(cloud, lobe: int, eye: np.ndarray, at=(0.2, 0.5, 0.8)) -> list[list[float]]:
+    """Points of ``lobe`` at fractions ``at`` of its longest extent as seen from ``eye`` (across the line of sight:
+    along it, two far-apart points can fall under one pixel, and two strokes there pick the same points)."""
     pts = cloud.points[cloud.lobe_of == lobe]
     c = pts.mean(axis=0)
-    axis = np.linalg.svd(pts - c)[2][0]
+    sight = (c - eye) / np.linalg.norm(c - eye)
+    flat = (pts - c) - np.outer((pts - c) @ sight, sight)
+    axis = np.linalg.svd(flat)[2][0]
     order = np.argsort((pts - c) @ axis)
-    return [pts[order[int(f * (len(order) - 1))]].tolist() for f in (0.2, 0.5, 0.8)]
+    return [pts[order[int(f * (len(order) - 1))]].tolist() for f in at]
 
 
 def test_a_mouse_stroke_over_the_scan_selects_the_points_under_it(client):  # noqa: F811
     app, runner = client
     cloud = _open(app, runner)
     lobe = _front_lobe(app)
-    stroke = _stroke_over(cloud, lobe)
+    stroke = _stroke_over(cloud, lobe, app.desktop.camera.eye)
     runner.run([{"stroke": stroke}])
     picked = app.state.point_selection
     assert len(picked) >= 5  # 0 when the stroke lay on the plane through the camera target
@@ -56,11 +84,10 @@ def test_a_mouse_stroke_over_the_scan_selects_the_points_under_it(client):  # no
 
 def test_split_strokes_drawn_over_a_lobe_split_it(client):  # noqa: F811
     app, runner = client
-    cloud = _open(app, runner)
-    lobe = _front_lobe(app)
-    a, _, b = _stroke_over(cloud, lobe)
+    _open(app, runner)
+    lobe, first, second = _two_strokes(app)
     n = len(app.state.draft.lobes)
-    runner.run([{"select": f"lobe:{lobe}"}, {"stroke": [a, a]}, {"stroke": [b, b]}, {"key": "enter"}])
+    runner.run([{"select": f"lobe:{lobe}"}, {"stroke": first}, {"stroke": second}, {"key": "enter"}])
     assert app.state.status == f"split lobe: {n + 1} lobes", app.state.status
 
 
