@@ -371,24 +371,26 @@ def test_rerouted_kept_lobes_keep_their_places(leaf_on, monkeypatch, rounds):
 def test_insert_lobe_rebuilds_the_lobe_it_takes_from(leaf_on):
     from arboretum_server.decompose.clear import inside_foreign
 
-    # The outer third of lobe 13 (by distance from the tree's axis): the lobe keeps its place with the
-    # rest of its points, a new centre, hull and branch; no branch runs through a lobe it does not feed
-    # (1 did when the lobe kept its old branch and got a plain hull).
+    # The outer third (by distance from the tree's axis) of the lobe whose centre lies nearest that axis
+    # (lobe 13 until session 30's k-means, lobe 10 since; of the 40 it is the one whose rest's mean a ring
+    # buries): the lobe keeps its place with the rest of its points, a new centre, hull and branch; no branch
+    # runs through a lobe it does not feed (1 did when the lobe kept its old branch and got a plain hull).
     d = leaf_on[2]
-    m = d.lobes[13].members
+    j = int(np.argmin([np.linalg.norm(lb.centre[:2]) for lb in d.lobes]))
+    m = d.lobes[j].members
     r = np.linalg.norm(d.points[m][:, :2], axis=1)
     i = refine.insert_lobe(d, m[r >= np.quantile(r, 0.67)])
     _check(i, N_L + 1)
     rest = np.sort(m[r < np.quantile(r, 0.67)])
-    assert np.array_equal(np.sort(i.lobes[13].members), rest)
+    assert np.array_equal(np.sort(i.lobes[j].members), rest)
     # the lobe sits on the trunk's axis, so the new lobe is a ring round it that buries the mean: the
     # centre moves to one of the lobe's own points outside every other lobe (carve.part_overlaps)
-    own, centre = d.points[rest], i.lobes[13].centre
-    assert inside_foreign(list(i.lobes), 13, own.mean(axis=0)[None])[0]
+    own, centre = d.points[rest], i.lobes[j].centre
+    assert inside_foreign(list(i.lobes), j, own.mean(axis=0)[None])[0]
     assert (np.abs(own - centre).sum(axis=1) < 1e-12).any()
-    assert not inside_foreign(list(i.lobes), 13, centre[None])[0]
-    assert np.allclose(i.lobes[13].segment[-1], i.lobes[13].centre)
-    others = [k for k in range(N_L) if k != 13]
+    assert not inside_foreign(list(i.lobes), j, centre[None])[0]
+    assert np.allclose(i.lobes[j].segment[-1], i.lobes[j].centre)
+    others = [k for k in range(N_L) if k != j]
     assert all(np.array_equal(i.lobes[k].members, d.lobes[k].members) for k in others)
     assert crossings(i.hbl) == 0
 
@@ -502,7 +504,8 @@ def test_cli_stores_examples_and_saves_hbl(truth, tmp_path, capsys):
     got = data["stats"]["main_branches"]
     assert got < 90 and data["notes"][0] == (f"{got} main branches found, 90 asked: the other candidate paths "
                                              "merged into them (Algorithm 1)")
-    assert data["notes"][1:] == [f"8 of {got} examples have no lobes: they grow no twigs or leaves"]
+    bare = re.fullmatch(rf"(\d+) of {got} examples have no lobes: they grow no twigs or leaves", data["notes"][1])
+    assert len(data["notes"]) == 2 and bare and 0 < int(bare[1]) < got  # 8 of 35 until session 30's k-means, 10 since
 
 
 def test_a_cloud_of_foliage_only_gets_a_note(tmp_path, capsys):

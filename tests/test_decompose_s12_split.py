@@ -55,7 +55,8 @@ def test_a_line_across_a_lobe_splits_it_where_drawn(d):
 def test_a_stroke_off_the_lobe_is_refused(d, where, words):
     out = _lobe(d, 5)
     strokes = [out[:1], out[:1] + [100.0, 0.0, 0.0]] if where == "far" else [out[:1], _lobe(d, 20)[:1]]
-    with pytest.raises(InputError, match=f"stroke 1 {words} lobe 5's points at its nearest \\(the lobe is 0.12"):
+    across = f"{np.linalg.norm(np.ptp(out, axis=0)):.3g}"  # the lobe's size in the message, in the output's metres
+    with pytest.raises(InputError, match=f"stroke 1 {words} lobe 5's points at its nearest \\(the lobe is {across} m"):
         refine.split_lobe(d, 5, strokes)
 
 
