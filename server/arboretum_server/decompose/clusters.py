@@ -55,22 +55,28 @@ def plus_plus(x: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
     return x[_plus_plus(np.ascontiguousarray(x, dtype=np.float64), first, draws)]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _squared(a, b):
+    """Squared distance of two points (d,)."""
+    s = 0.0
+    for i in range(a.shape[0]):
+        t = a[i] - b[i]
+        s += t * t
+    return s
+
+
 @njit(cache=True, nogil=True)
 def _plus_plus(x, first, draws):
     """Indices (k,) of the points ``plus_plus`` starts from: ``draws`` (k - 1, trials) uniform in [0, 1)."""
-    n, dim = x.shape[0], x.shape[1]
+    n = x.shape[0]
     k, trials = draws.shape[0] + 1, draws.shape[1]
     picked = np.zeros(k, np.int64)
     picked[0] = first
     closest = np.zeros(n)
     pot = 0.0
     for i in range(n):
-        s = 0.0
-        for a in range(dim):
-            t = x[i, a] - x[first, a]
-            s += t * t
-        closest[i] = s
-        pot += s
+        closest[i] = _squared(x[i], x[first])
+        pot += closest[i]
     cum = np.zeros(n)
     cand = np.zeros((trials, n))
     for c in range(1, k):
@@ -87,11 +93,7 @@ def _plus_plus(x, first, draws):
             p = min(np.searchsorted(cum, draws[c - 1, t] * pot), n - 1)
             total = 0.0
             for i in range(n):
-                s = 0.0
-                for a in range(dim):
-                    u = x[i, a] - x[p, a]
-                    s += u * u
-                s = min(s, closest[i])
+                s = min(_squared(x[i], x[p]), closest[i])
                 cand[t, i] = s
                 total += s
             if total < best_sum:
@@ -104,15 +106,12 @@ def _plus_plus(x, first, draws):
 
 @njit(cache=True, nogil=True)
 def _assign(x, centres, labels, dist):
-    n, k, dim = x.shape[0], centres.shape[0], x.shape[1]
+    n, k = x.shape[0], centres.shape[0]
     changed = 0
     for i in range(n):
         best, bd = 0, np.inf
         for c in range(k):
-            s = 0.0
-            for a in range(dim):
-                t = x[i, a] - centres[c, a]
-                s += t * t
+            s = _squared(x[i], centres[c])
             if s < bd:
                 best, bd = c, s
         if labels[i] != best:
