@@ -20,6 +20,10 @@ from arboretum_server.decompose.graph import (
 )
 from factories import hbl_arrays
 
+MIN_REROUTES = 20
+"""The fewest reroutes the leaf-on pine's decomposition must make for the shared-Dijkstra test to mean
+something (36 before session 30, 35 after)."""
+
 
 def _tied_graph(rng: np.random.Generator, n: int):
     """A connected symmetric graph on ``n`` nodes with weights 1, 2 or 3 (times 0.1 or 1): many exact ties."""
@@ -131,9 +135,12 @@ def pine_points():
 
 
 def test_reroutes_are_bounded_and_change_nothing(pine_points, monkeypatch):
-    """The leaf-on pine reroutes 36 branches: since session 24 they share one more Dijkstra (the graph with
-    every zone foreign, ``secondary._reroute_path``), each repaired over its own lobe's zone edges, and the
-    decomposition equals the one with a full run per reroute."""
+    """The leaf-on pine reroutes many branches (36 before session 30, 35 with the lobes of our own k-means):
+    since session 24 they share one more Dijkstra (the graph with every zone foreign,
+    ``secondary._reroute_path``), each repaired over its own lobe's zone edges, and the decomposition equals the
+    one with a full run per reroute. Session 30: the count is read from the decomposition (at least
+    ``MIN_REROUTES``) instead of fixed at 36, so a change of lobes does not break the test; the full runs must
+    still be one per reroute and the shared ones still 3 in all."""
     from arboretum_server.decompose import secondary
     from arboretum_server.decompose.options import DecomposeOptions
     from arboretum_server.decompose.pipeline import decompose
@@ -148,9 +155,10 @@ def test_reroutes_are_bounded_and_change_nothing(pine_points, monkeypatch):
 
     monkeypatch.setattr(graph, "dijkstra", spy)
     shared = decompose(pine_points, DecomposeOptions(species="pine"))
-    assert shared.stats["rerouted"] == 36 and len(runs) == 3  # mains, shared routing, the all-foreign run
+    rerouted = shared.stats["rerouted"]  # 35 today
+    assert rerouted >= MIN_REROUTES and len(runs) == 3  # mains, shared routing, the all-foreign run
     full_path = lambda r, j, adj, target: path_to(shortest_paths(adj, r.root)[1], target)  # noqa: E731
     monkeypatch.setattr(secondary, "_reroute_path", full_path)
     full = decompose(pine_points, DecomposeOptions(species="pine"))
-    assert len(runs) == 3 + 2 + 36
+    assert full.stats["rerouted"] == rerouted and len(runs) == 3 + 2 + rerouted
     assert all(np.array_equal(a, b) for a, b in zip(hbl_arrays(shared), hbl_arrays(full), strict=True))
