@@ -23,16 +23,17 @@ def leaf_on_pine():
     return decompose(pts, DecomposeOptions(species="pine"))
 
 
-def bench_strokes(d, j: int, k: int) -> list[np.ndarray]:
+def bench_strokes(d, j: int, k: int, first_seed: int = 100) -> list[np.ndarray]:
     """``k`` one-point strokes (output frame) as the bench's ``_twenty_strokes`` draws them: the lobe's points
-    nearest a k-means++ clustering of it (seeds 100-103), the first set that gives every piece 4 points."""
+    nearest a k-means++ clustering of it (seeds ``first_seed`` to ``first_seed + 3``, the bench's 100-103), the
+    first set that gives every piece 4 points."""
     from scipy.cluster.vq import kmeans2
     from scipy.spatial import cKDTree
 
     from arboretum_server.decompose.refine import MIN_LOBE_POINTS, from_output, stroke_parts
 
     m = d.lobes[j].members
-    for seed in range(100, 104):
+    for seed in range(first_seed, first_seed + 4):
         pick = m[cKDTree(d.points[m]).query(kmeans2(d.points[m], k, seed=seed, minit="++")[0])[1]]
         strokes = [d.to_output(d.points[p])[None] for p in pick]
         if len(set(pick.tolist())) == k:

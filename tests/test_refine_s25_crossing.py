@@ -41,20 +41,12 @@ PROBE_SEEDS = 200
 def _probe_strokes(d, j: int, k: int) -> list[np.ndarray] | None:
     """``k`` one-point strokes drawn as ``split_helpers.bench_strokes`` draws them but with seeds
     ``PROBE_SEEDS`` to ``PROBE_SEEDS + 3``; None when no set gives every piece 4 points."""
-    from scipy.cluster.vq import kmeans2
-    from scipy.spatial import cKDTree
+    from split_helpers import bench_strokes
 
-    from arboretum_server.decompose.refine import MIN_LOBE_POINTS, from_output, stroke_parts
-
-    m = d.lobes[j].members
-    for seed in range(PROBE_SEEDS, PROBE_SEEDS + 4):
-        pick = m[cKDTree(d.points[m]).query(kmeans2(d.points[m], k, seed=seed, minit="++")[0])[1]]
-        strokes = [d.to_output(d.points[p])[None] for p in pick]
-        if len(set(pick.tolist())) == k:
-            owner = stroke_parts(d.points[m], [from_output(d, s) for s in strokes], j, 1.0)
-            if np.bincount(owner, minlength=k).min() >= MIN_LOBE_POINTS:
-                return strokes
-    return None
+    try:
+        return bench_strokes(d, j, k, first_seed=PROBE_SEEDS)
+    except AssertionError:
+        return None
 
 
 def _free_calls(monkeypatch, fn, *args):
