@@ -36,16 +36,15 @@ def _two_strokes(app) -> tuple[int, list, list]:
     not all shared. A stroke lands on the point nearest the eye within the brush (5 cm) of the cursor's ray
     (``Interaction._on_cloud``): on a lobe 4-9 cm across, or behind another, two one-point strokes along its
     longest extent landed on one point (session 30's lobes)."""
-    cloud, eye, brush = app.state.cloud, app.desktop.camera.eye, app.interaction.brush
+    from types import SimpleNamespace
+
+    cloud, eye = app.state.cloud, app.desktop.camera.eye
     lobes = [j for j in range(len(app.state.draft.lobes)) if (cloud.lobe_of == j).sum() >= 30]
     lobes.sort(key=lambda j: np.linalg.norm(cloud.points[cloud.lobe_of == j].mean(axis=0) - eye))
 
-    def lands(p) -> int:
+    def lands(p) -> tuple:  # where the client lands a cursor over p: the same call a mouse sample makes
         ray = (np.asarray(p) - eye) / np.linalg.norm(np.asarray(p) - eye)
-        rel = cloud.points - eye
-        t = rel @ ray
-        near = np.flatnonzero(np.linalg.norm(rel - t[:, None] * ray, axis=1) <= brush)
-        return int(near[np.argmin(t[near])])
+        return tuple(app.interaction._on_cloud(SimpleNamespace(position=eye, ray_dir=ray, pixel=(0, 0))))
 
     for j in lobes:
         line = _stroke_over(cloud, j, eye, np.linspace(0.0, 1.0, 10))

@@ -150,9 +150,7 @@ def _lloyd(x, centres, tol, rounds):
                     new[c, a] = x[far, a]
         shift = 0.0
         for c in range(k):
-            for a in range(dim):
-                t = new[c, a] - centres[c, a]
-                shift += t * t
+            shift += _squared(new[c], centres[c])
         centres = new
         if _assign(x, centres, labels, dist) == 0 or shift <= tol:
             break
