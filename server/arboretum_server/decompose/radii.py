@@ -43,3 +43,18 @@ def lobe_weights(counts: np.ndarray) -> np.ndarray:
     if len(counts) == 0:
         return counts
     return np.clip(counts / max(counts.mean(), 1e-12), 0.2, 5.0)
+
+
+def path_radii(owner: list[np.ndarray], r0: float) -> list[np.ndarray]:
+    """Radii (L_b,) along each full path b from the root by the pipe model with the path tips alone: a
+    vertex carried by c of the P paths (``owner[b]`` (L_b, 2): the (segment, vertex) each vertex is) has
+    ``r0 sqrt(c / P)``. The main branches' wood before any lobe is known: the trunk ``r0``, one tip of eight
+    main branches 0.35 ``r0``."""
+    keys = [np.asarray(o, np.int64) for o in owner]
+    if not keys:
+        return []
+    flat = np.concatenate(keys)
+    _, inverse, counts = np.unique(flat, axis=0, return_inverse=True, return_counts=True)
+    carried = counts[inverse.ravel()].astype(np.float64)
+    r = r0 * np.sqrt(carried / len(keys))
+    return np.split(r, np.cumsum([len(k) for k in keys])[:-1])
