@@ -38,24 +38,30 @@ class _Parser(argparse.ArgumentParser):
         super().error(message)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``arboretum`` parser with every subcommand, or with only ``command`` when a package registers one
+    of that name (``main`` passes the first word of the command line: ``arboretum decompose ...`` then
+    imports no other command's module: 23 modules at session 31). Parsing a command
+    line that starts with ``command`` gives the same result, help and errors either way: the top-level
+    usage names no commands (``COMMAND``)."""
     parser = _Parser(
         prog="arboretum",
         description="Realistic 3D trees from real ones: scans -> HBL example libraries -> assembly -> growth -> export.",
     )
     parser.add_argument("--version", action="version", version=f"arboretum {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    register_extensions(sub, GROUP)
+    register_extensions(sub, GROUP, only=command)
     return parser
 
 
-def register_extensions(sub: argparse._SubParsersAction, group: str) -> None:
-    """Let other packages add actions to a subcommand through the entry-point ``group``.
+def register_extensions(sub: argparse._SubParsersAction, group: str, only: str | None = None) -> None:
+    """Let other packages add actions to a subcommand through the entry-point ``group``; with ``only``
+    the entry points of that name alone, when there is one (else all).
 
     How ``arboretum library build`` (which needs Dask, a server dependency) joins the library's own
     ``library`` command without the library importing the server.
     """
-    for ep in sorted(entry_points(group=group), key=lambda e: e.name):
+    for ep in _chosen(sorted(entry_points(group=group), key=lambda e: e.name), only):
         try:
             register = ep.load()
         except ImportError as exc:
@@ -63,6 +69,17 @@ def register_extensions(sub: argparse._SubParsersAction, group: str) -> None:
             p.set_defaults(func=_unavailable(ep.name, str(exc)))
             continue
         register(sub)
+
+
+def _chosen(eps: list, only: str | None) -> list:
+    """The entry points of ``eps`` named ``only``; all of them when ``only`` is None or names none."""
+    named = [ep for ep in eps if ep.name == only]
+    return named or eps
+
+
+def _first_word(words: list[str]) -> str | None:
+    """The command a command line names (its first word, when that is no option), else None."""
+    return words[0] if words and not words[0].startswith("-") else None
 
 
 def _unavailable(name: str, why: str):
@@ -135,7 +152,7 @@ def _json_failure(command: str, message: str, code: int) -> None:
 def main(argv: list[str] | None = None) -> int:
     words = sys.argv[1:] if argv is None else argv
     try:
-        parser = build_parser()
+        parser = build_parser(_first_word(words))
         _Parser.json_errors = "--json" in words
         args = parser.parse_args(argv)
     except KeyboardInterrupt:  # while the commands register (numpy loads): a 28-44-line traceback before
@@ -165,5 +182,8 @@ _DISK_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EIO}
 deserves one line rather than a traceback."""
 
 
-if __name__ == "__main__":
+if __name__ == "__main__":  # python -m arboretum_library.cli, as the console script (entry.run)
+    from arboretum_library.entry import skip_exit_collection
+
+    skip_exit_collection()
     sys.exit(main())

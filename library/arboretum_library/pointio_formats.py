@@ -9,7 +9,9 @@ readers refuse NaN/infinite rows themselves, naming the line. A problem with the
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
+from types import ModuleType
 from typing import Any, BinaryIO
 
 import numpy as np
@@ -220,8 +222,42 @@ def read_ply(path: Path) -> Raw:
     return from_named(path, columns)
 
 
+LASPY_UNUSED = ("requests",)
+"""Modules laspy imports only for what this module never does (``requests``: its COPC reader over HTTP,
+in a ``try`` that leaves it None when missing); ``import_laspy`` keeps them out: ``requests`` and with it
+urllib3, idna and charset_normalizer were 60-100 ms of ``arboretum decompose FILE.las`` (session 31)."""
+
+
+def import_laspy() -> ModuleType:
+    """laspy, imported the first time without ``LASPY_UNUSED`` (each ``None`` in ``sys.modules`` while laspy
+    loads, so its ``import requests`` fails as if it were not installed; removed again after, so a later
+    ``import requests`` works). A laspy that cannot do without one is imported again with it."""
+    if "laspy" in sys.modules:
+        return sys.modules["laspy"]
+    kept_out = [m for m in LASPY_UNUSED if m not in sys.modules]
+    for name in kept_out:
+        sys.modules[name] = None  # type: ignore[assignment]  # what the import system reads as "not installed"
+    try:
+        import laspy
+    except ModuleNotFoundError as exc:
+        if exc.name not in kept_out:
+            raise
+        _let_in(kept_out)
+        import laspy
+    finally:
+        _let_in(kept_out)
+    return laspy
+
+
+def _let_in(names: list[str]) -> None:
+    """Undo ``import_laspy``'s blocking of ``names`` (a module imported for real since stays)."""
+    for name in names:
+        if name in sys.modules and sys.modules[name] is None:
+            del sys.modules[name]
+
+
 def read_las(path: Path) -> Raw:
-    import laspy
+    laspy = import_laspy()
 
     try:
         las = laspy.read(str(path))
