@@ -6,9 +6,9 @@
 2. Describe: each piece is resampled to ``samples`` points by arc length and put in a canonical frame
    (base at the origin, chord along +Z, the mean bend along +X), divided by its arc length; with its base
    and tip radii over arc length this is a rotation- and scale-normalised signature.
-3. Cluster: k-means (scikit-learn, seeded) into K types; each type's representative is the member
-   nearest its centroid (a medoid), whose polyline, at its own size, is the module's skeleton; the module
-   mesh is a tube along it (``mesh.tubes.sweep``).
+3. Cluster: k-means (``decompose.clusters``, the best of ``INITS`` seeded runs) into K types; each type's
+   representative is the member nearest its centroid (a medoid), whose polyline, at its own size, is the
+   module's skeleton; the module mesh is a tube along it (``mesh.tubes.sweep``).
 4. Fit: every piece gets the rotation and uniform scale that best map its type's skeleton onto its own
    resampled points with the bases pinned together (orthogonal Procrustes with scale, Umeyama's SVD with
    the reflection guard), so consecutive pieces stay joined.
@@ -24,6 +24,7 @@ import numpy as np
 
 from arboretum_library.errors import InputError
 from arboretum_library.export.parts import MeshPart
+from arboretum_server.decompose.clusters import kmeans
 from arboretum_server.grow.skeleton import GrownTree
 from arboretum_server.mesh.chains import split_chains
 from arboretum_server.mesh.tubes import sweep
@@ -159,23 +160,32 @@ def fit_pinned(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return R, np.maximum(s, 1e-9)
 
 
-def _cluster(sig: np.ndarray, k: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """Labels (P,) and medoid piece per type (K,), types renumbered by first appearance."""
-    from sklearn.cluster import KMeans
-    from threadpoolctl import threadpool_limits
+INITS = 4
+"""k-means runs per conversion, each from its own k-means++ start; the one with the least inertia is kept."""
 
+
+def _cluster(sig: np.ndarray, k: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Labels (P,) and medoid piece per type (K,), types renumbered by first appearance.
+
+    The best of ``INITS`` k-means runs (``decompose.clusters``, one thread: the same types on any machine),
+    seeded by one draw from ``rng``. Until session 31 scikit-learn's ``KMeans(n_init=4)``, whose import cost
+    ``arboretum modules`` 0.9-1.3 s here."""
     k = min(k, len(np.unique(sig.round(12), axis=0)))
-    km = KMeans(n_clusters=k, n_init=4, random_state=int(rng.integers(0, 2**31 - 1)))
-    with threadpool_limits(limits=1, user_api="openmp"):  # the same types on any core count (as the lobes' k-means, session 24)
-        km.fit(sig)
-    labels = km.labels_.astype(np.int64)
+    runs = np.random.default_rng(int(rng.integers(0, 2**31 - 1)))
+    best = None
+    for _ in range(INITS):
+        labels, centres = kmeans(sig, k, runs)
+        inertia = float(((sig - centres[labels]) ** 2).sum())
+        if best is None or inertia < best[0]:
+            best = (inertia, labels.astype(np.int64), centres)
+    _, labels, centres = best
     _, first = np.unique(labels, return_index=True)
     order = labels[np.sort(first)]
     k = len(order)
-    remap = np.full(km.n_clusters, -1, np.int64)
+    remap = np.full(len(centres), -1, np.int64)
     remap[order] = np.arange(k)
     labels = remap[labels]
-    centres = km.cluster_centers_[order]
+    centres = centres[order]
     d = np.linalg.norm(sig - centres[labels], axis=1)
     medoid = np.array([np.flatnonzero(labels == t)[np.argmin(d[labels == t])] for t in range(k)])
     return labels, medoid
