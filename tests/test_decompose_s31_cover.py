@@ -37,7 +37,8 @@ def test_path_radii_share_the_trunk_among_the_tips():
 
 def test_given_labels_cluster_the_twigs_off_the_main_branches_but_not_the_bare_trunk():
     # 200 leaves, 100 twig points off the main branches in the crown, 50 on a main branch, 50 on the bare
-    # trunk (off the main branch's wood by the clearance, below the crown base by the bare-trunk rule)
+    # trunk (off the main branch's wood by the clearance, below the crown base by the bare-trunk rule; the
+    # caller relabels them wood when the labels were guessed)
     n = 400
     pts = np.zeros((n, 3))
     pts[:, 2] = 0.5
@@ -50,6 +51,11 @@ def test_given_labels_cluster_the_twigs_off_the_main_branches_but_not_the_bare_t
     fol, source = foliage_points(labels, pts, off_main, DecomposeOptions(n_lobes=10), bare)
     assert source == "leaf"
     np.testing.assert_array_equal(fol, np.arange(300))
+    # a given leaf on the bare trunk (a shoot from the trunk) stays a leaf of the foliage
+    labels[390:] = LEAF
+    fol, _ = foliage_points(labels, pts, off_main, DecomposeOptions(n_lobes=10), bare)
+    np.testing.assert_array_equal(fol, np.r_[np.arange(300), np.arange(390, 400)])
+    labels[390:] = WOOD
     # the lowest 5 % of the tree never joins, whatever its label says
     pts[250:300, 2] = CROWN_BASE / 2
     fol, _ = foliage_points(labels, pts, off_main, DecomposeOptions(n_lobes=10), bare)

@@ -115,13 +115,14 @@ def foliage_points(labels: np.ndarray, pts: np.ndarray, off_main: np.ndarray, o:
     twigs"; with given labels too since session 31: the guiding-vector elm, seed 3, with labels, covered
     94 % of its leaf points, the scan's leaves beside its twigs lost in the downsampling).
     Leaf-off trees (fewer than ``leaf_off_fraction`` leaf points) cluster that crown alone. Points of the
-    ``bare`` trunk (N,) bool never join a leaf-on tree's foliage.
+    ``bare`` trunk (N,) bool join a leaf-on tree's foliage only as leaf points (guessed labels call them
+    wood: ``decompose``; given labels are believed: leaves growing from the trunk stay).
     """
     n_lobes = o.counts()[1]
     leaf = labels == LEAF
     crown = off_main & (pts[:, 2] > CROWN_BASE)
     if leaf.sum() >= max(4 * n_lobes, o.leaf_off_fraction * len(pts)):
-        return np.flatnonzero((leaf | crown) & ~bare), "leaf"
+        return np.flatnonzero(leaf | (crown & ~bare)), "leaf"
     if crown.sum() >= 4 * n_lobes:
         return np.flatnonzero(crown), "crown"
     return np.arange(len(pts)), "all"
