@@ -17,7 +17,7 @@ import numpy as np
 from .clear import boxes, inside_foreign, main_vertices
 from .lobes import RADIUS_STEPS, Tetrahedra, carved_hull, inside, plain_steps
 from .memo import ArrayMemo
-from .merge import BranchSet, sample_polylines
+from .merge import BranchSet, resample_step, sample_polylines
 from .state import LobeState
 
 
@@ -35,7 +35,8 @@ def unwrap(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, ra
     lies inside the hull it replaces, so no other branch starts crossing. Only hulls change (members,
     centres and branches stay); a lobe wrapped round a trunk can lose its own centre to the tunnel. The
     same blockers every time, so carving a lobe again gives the same shape. A lobe whose carved shape is
-    not a closed one-piece surface is kept.
+    not a closed one-piece surface is kept, and so is one whose carved shape takes in another lobe's branch
+    that its hull kept out (a hull carved before round that branch; ``carve_clear``, session 31).
     """
     if not mains.segments:
         return 0
@@ -43,14 +44,59 @@ def unwrap(lobes: list[LobeState], j: int, mains: BranchSet, pts: np.ndarray, ra
     near_pts = verts[np.argsort(np.linalg.norm(verts - lobes[j].centre, axis=1))[:near]]
     wood = sample_polylines(mains.segments, step)
     held = _boxes_hold(boxes(lobes), near_pts)
-    changed = 0
+    changed, branches = 0, []
     for k in map(int, np.flatnonzero(held.any(axis=1))):
         lb = lobes[k]
         if k == j or not inside(lb.hull_vertices, lb.hull_faces, near_pts[held[k]]).any():
             continue
-        if carve_lobe(lobes, k, pts, wood, radius):
-            changed += 1
+        changed += carve_clear(lobes, k, pts, wood, radius, (j, k), branches, step)
     return changed
+
+
+def carve_clear(lobes: list[LobeState], k: int, pts: np.ndarray, blockers: np.ndarray, radius: float,
+                skip: tuple[int, ...], branches: list, step: float = 0.005) -> bool:
+    """``carve_lobe`` refused when it puts a sample of another branch (every ``step``; those of the lobes ``skip``
+    left out) inside lobe ``k``'s hull where it lay outside before: carved again with those branches as blockers
+    too, else the hull is kept (in place; True when carved). ``branches``: an empty list, or ``_branch_samples``
+    of these lobes' branches in it, filled at the first need (``unwrap`` and ``part_overlaps`` change hulls,
+    never branches).
+
+    A lobe is carved from its plain tetrahedralisation: the result lies inside its plain hull, not inside one
+    carved before round other branches (``tunnel.carve_route``, ``refine._give_way``), whose tunnels it may fill
+    (session 31: the leaf-on pine's "around" inserts of lobes 14 and 31 re-carved kept lobe 32 round the trunk
+    and filled its tunnel for kept lobe 4's branch, 2.4 mm deep)."""
+    lb = lobes[k]
+    if not carve_lobe(lobes, k, pts, blockers, radius):
+        return False
+    if not branches:
+        branches.extend(_branch_samples(lobes, step))
+    if not _swallows(lb, lobes[k], branches, skip):
+        return True
+    lobes[k] = lb
+    others = branches[0][~np.isin(branches[1], skip)]
+    if carve_lobe(lobes, k, pts, np.concatenate([blockers, others]), radius) and \
+            not _swallows(lb, lobes[k], branches, skip):
+        return True
+    lobes[k] = lb
+    return False
+
+
+def _branch_samples(lobes: list[LobeState], step: float) -> tuple[np.ndarray, np.ndarray]:
+    """(every lobe's secondary branch resampled every ``step`` (P, 3), each sample's lobe (P,))."""
+    parts = [resample_step(lb.segment, step) if len(lb.segment) else np.zeros((0, 3)) for lb in lobes]
+    return np.concatenate(parts).reshape(-1, 3), np.repeat(np.arange(len(lobes)), [len(p) for p in parts])
+
+
+def _swallows(old: LobeState, new: LobeState, branches: list, skip: tuple[int, ...]) -> bool:
+    """True if a sample of a branch (``branches``: ``_branch_samples``; those of the lobes ``skip`` left out) lies
+    inside ``new``'s hull and outside ``old``'s (``carve_clear``)."""
+    q, owner = branches
+    lo, hi = new.hull_vertices.min(axis=0), new.hull_vertices.max(axis=0)
+    near = ((q > lo) & (q < hi)).all(axis=1) & ~np.isin(owner, skip)
+    if not near.any():
+        return False
+    now = inside(new.hull_vertices, new.hull_faces, q[near])
+    return bool(now.any() and (~inside(old.hull_vertices, old.hull_faces, q[near][now])).any())
 
 
 def _boxes_hold(box: tuple[np.ndarray, np.ndarray], q: np.ndarray) -> np.ndarray:
@@ -132,17 +178,19 @@ def part_overlaps(lobes: list[LobeState], start: int, mains: BranchSet, pts: np.
     points a user selects for ``insert_lobe`` border the lobe they came from, and the two alpha shapes
     (probe radius about a lobe's size) overlap: neither branch could reach its centre. Carving fails
     when the blockers split the shape; then the lobe's centre moves to its own point nearest the old
-    centre outside every other lobe (its branch ends there), when it has one.
+    centre outside every other lobe (its branch ends there), when it has one. A carving that takes in a
+    branch the hull kept out is refused as in ``unwrap`` (``carve_clear``).
     """
     wood = sample_polylines(mains.segments, step)
-    changed = 0
+    changed, branches = 0, []
     for j in range(start, len(lobes)):
         c = lobes[j].centre[None]
         lo, hi = boxes(lobes)
-        for k in np.flatnonzero(((c > lo) & (c < hi)).all(axis=1)):
+        for k in map(int, np.flatnonzero(((c > lo) & (c < hi)).all(axis=1))):
             if k == j or not inside(lobes[k].hull_vertices, lobes[k].hull_faces, c).any():
                 continue
-            changed += carve_lobe(lobes, int(k), pts, np.concatenate([pts[lobes[j].members], wood]), radius)
+            changed += carve_clear(lobes, k, pts, np.concatenate([pts[lobes[j].members], wood]), radius, (j, k),
+                                   branches, step)
         if inside_foreign(lobes, j, c)[0]:
             own = pts[lobes[j].members]
             free = own[~inside_foreign(lobes, j, own)]

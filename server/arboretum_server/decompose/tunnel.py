@@ -259,6 +259,11 @@ FREE_REACH = (0.025, 0.05, 0.1)
 """Distances (0.8 m scale) from a piece's centre of the waypoints ``_along_free`` bends through."""
 FREE_DIRECTIONS = 32
 """Directions (a Fibonacci sphere) of ``_along_free``'s waypoints at each distance."""
+FREE_MORE = 4
+"""Routes ``_along_free`` checks whole after its first ``ROUTES_TRIED`` fail, each through a waypoint no route
+checked before went through (session 31): the legs are tested every 5 mm from their own ends, the whole route
+every ``tol`` from its start, so a leg grazing a small lobe can pass the first test and fail the second, and the
+next candidates, from the split branch's next vertices to the same waypoint, graze it alike."""
 
 
 def _sphere(m: int) -> np.ndarray:
@@ -292,7 +297,10 @@ def _along_free(lobes: list[LobeState], j: int, seg: np.ndarray, tol: float, box
     v, b = np.repeat(np.arange(ok), len(w)), np.tile(w, (ok, 1))
     arc = _arc_lengths(seg)[v]
     order = np.argsort(arc + np.linalg.norm(b - seg[v], axis=1) + np.linalg.norm(b - centre, axis=1), kind="stable")
-    for _ in range(ROUTES_TRIED):
+    tried = np.zeros(len(w), bool)  # the waypoints of the routes checked whole (each failed)
+    for n in range(ROUTES_TRIED + FREE_MORE):
+        if n == ROUTES_TRIED:  # the rest through waypoints not tried yet
+            order = order[~tried[order % len(w)]]
         k = first_clear(lobes, j, seg[v[order]], b[order], step, box, v[order])
         if k < 0:
             return None
@@ -300,7 +308,10 @@ def _along_free(lobes: list[LobeState], j: int, seg: np.ndarray, tol: float, box
         route = _via(seg, v[i], b[i], centre)
         if not foreign(lobes, j, route, tol, box):
             return route
+        tried[i % len(w)] = True
         order = order[k + 1:]
+        if n >= ROUTES_TRIED:
+            order = order[order % len(w) != i % len(w)]
     return None
 
 
