@@ -24,6 +24,7 @@ from .clear import (
     foreign,
     inside_foreign,
     kept_boxes,
+    main_vertices,
     straight_from,
     straight_routes,
     unit_steps,
@@ -100,6 +101,8 @@ def behind(lobes: list[LobeState], n_kept: int, pts: np.ndarray, mains: BranchSe
         if not any(carve_route(lobes, n_kept, j, route, pts, o, step)
                    for route in _routes(lobes, n_kept, j, pts, mains, step)):
             moved_centre(lobes, j, pts, mains)
+            if buried(lobes, j, pts):
+                shallow_centre(lobes, j, pts, mains)
     return asked
 
 
@@ -177,6 +180,52 @@ def moved_centre(lobes: list[LobeState], j: int, pts: np.ndarray, mains: BranchS
     if found is not None:
         route = found[1]
         lobes[j] = replace(lobes[j], centre=own[found[0]], segment=route[0], parent=route[1], parent_vertex=route[2])
+
+
+SHALLOW = 0.001
+"""How deep (0.8 m scale, working frame) ``shallow_centre``'s branch may run inside other lobes: half of
+``evaluate.CROSS_TOL``, the depth at which a branch counts as crossing."""
+SHALLOW_STEP = 0.0005
+"""Spacing of the samples ``shallow_centre`` measures a route's depth at (a tenth of ``foreign``'s)."""
+
+
+def buried(lobes: list[LobeState], j: int, pts: np.ndarray) -> bool:
+    """True if every point of lobe ``j`` lies inside another lobe: ``moved_centre`` has no point to move its
+    centre to, and no branch reaches lobe ``j`` without entering another lobe."""
+    return bool(inside_foreign(lobes, j, pts[lobes[j].members]).all())
+
+
+def depths(lobes: list[LobeState], j: int, q: np.ndarray) -> np.ndarray:
+    """(M,) how deep each of ``q`` (M, 3) lies inside a lobe other than ``j`` (its largest depth; 0 outside all)."""
+    from .evaluate import signed_distances
+
+    out = np.zeros(len(q))
+    lo, hi = boxes(lobes)
+    for k in map(int, np.flatnonzero(_boxes_meet(lo, hi, q))):
+        if k != j:
+            out = np.maximum(out, -signed_distances(lobes[k].hull_vertices, lobes[k].hull_faces, q))
+    return out
+
+
+def shallow_centre(lobes: list[LobeState], j: int, pts: np.ndarray, mains: BranchSet, tries: int = 64) -> None:
+    """Lobe ``j``'s centre moved to the own point that a straight branch from one of the ``tries`` main-branch
+    vertices nearest it reaches running at most ``SHALLOW`` deep inside other lobes (its points shallowest
+    first, each vertex nearest first), with that branch (in place; nothing changes when none does). The last
+    resort for a lobe ``buried`` in another whose carving failed: a user's selection at the core of a small
+    lobe leaves the rest round it as a shell of 10-20 points, which no carving keeps closed."""
+    own = pts[lobes[j].members]
+    deep = depths(lobes, j, own)
+    verts, owner = main_vertices(mains)
+    for i in np.argsort(deep, kind="stable"):
+        if deep[i] > SHALLOW:
+            return
+        for v in np.argsort(np.linalg.norm(verts - own[i], axis=1), kind="stable")[:tries]:
+            m = max(2, int(np.ceil(np.linalg.norm(own[i] - verts[v]) / 0.01)) + 1)  # clear.straight_fallback's
+            seg = verts[v] + unit_steps(m) * (own[i] - verts[v])
+            if depths(lobes, j, resample_step(seg, SHALLOW_STEP)).max() <= SHALLOW:
+                lobes[j] = replace(lobes[j], centre=own[i], segment=seg, parent=int(owner[v][0]),
+                                   parent_vertex=int(owner[v][1]))
+                return
 
 
 def entered(before: list[LobeState], after: list[LobeState], changed: list[int], tol: float) -> bool:
