@@ -31,6 +31,7 @@ from .clear import (
 )
 from .lobes import inside
 from .merge import BranchSet, resample_step, sample_polylines
+from .meshdist import surface_distances
 from .options import DecomposeOptions
 from .state import LobeState
 
@@ -196,14 +197,17 @@ def buried(lobes: list[LobeState], j: int, pts: np.ndarray) -> bool:
 
 
 def depths(lobes: list[LobeState], j: int, q: np.ndarray) -> np.ndarray:
-    """(M,) how deep each of ``q`` (M, 3) lies inside a lobe other than ``j`` (its largest depth; 0 outside all)."""
-    from .evaluate import signed_distances
-
+    """(M,) how deep each of ``q`` (M, 3) lies inside a lobe other than ``j`` (its largest depth; 0 outside all):
+    the distance to the hull's surface (``meshdist``, numpy) of the points ``inside`` it."""
     out = np.zeros(len(q))
     lo, hi = boxes(lobes)
     for k in map(int, np.flatnonzero(_boxes_meet(lo, hi, q))):
-        if k != j:
-            out = np.maximum(out, -signed_distances(lobes[k].hull_vertices, lobes[k].hull_faces, q))
+        if k == j:
+            continue
+        lb = lobes[k]
+        within = np.flatnonzero(inside(lb.hull_vertices, lb.hull_faces, q))
+        if len(within):
+            out[within] = np.maximum(out[within], surface_distances(lb.hull_vertices, lb.hull_faces, q[within]))
     return out
 
 
