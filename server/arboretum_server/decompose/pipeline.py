@@ -83,8 +83,8 @@ def main_clearance(mains, pts: np.ndarray, tau: float, tree: cKDTree, r_trunk: f
     the virtual scanner, left out 1.7 cm round its tips, 6 % of its leaf points).
     """
     verts = np.concatenate([mains.reference(b) for b in range(len(mains.full))])  # unsmoothed: on the wood
-    r = np.clip(1.3 * np.median(tree.query(verts, k=8)[0], axis=1), 0.004, tau)
-    r = np.maximum(np.minimum(r, CLEARANCE_PIPE * np.concatenate(path_radii(mains.owner, r_trunk))), 0.004)
+    spacing = np.minimum(1.3 * np.median(tree.query(verts, k=8)[0], axis=1), tau)
+    r = np.maximum(np.minimum(spacing, CLEARANCE_PIPE * np.concatenate(path_radii(mains.owner, r_trunk))), 0.004)
     d, i = query(cKDTree(verts), pts)
     return d > r[i]
 
